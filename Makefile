@@ -1,0 +1,55 @@
+# topo_planner: the two commands are `make demo` and `make test` (see README.md).
+SHELL := /bin/bash
+ROOT := $(CURDIR)
+JOBS ?= 2
+WS := $(ROOT)/build/ws
+CATKIN_ARGS := -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=Release
+BIN = $(1)/devel/lib/topo_planner
+
+.PHONY: deps build test bench bench-env demo test-asan test-tsan clean
+
+deps:
+	@bash scripts/install_deps.sh
+
+# A catkin workspace under build/ whose src/ links to this repository. build/CATKIN_IGNORE keeps a
+# workspace that holds this repository in its own src/ from finding the package twice.
+define make_ws
+	@mkdir -p $(1)/src
+	@touch $(ROOT)/build/CATKIN_IGNORE
+	@ln -sfn $(ROOT) $(1)/src/topo_planner
+endef
+
+build: deps
+	$(call make_ws,$(WS))
+	cd $(WS) && catkin_make -j$(JOBS) $(CATKIN_ARGS)
+
+# Builds and runs every gtest and rostest, then prints `N passed, N failed`.
+test: build
+	@rm -rf $(WS)/build/test_results
+	cd $(WS) && catkin_make -j$(JOBS) $(CATKIN_ARGS) run_tests
+	@/usr/bin/python3 scripts/test_summary.py $(WS)/build/test_results
+
+bench: bench-env
+
+bench-env: build
+	$(call BIN,$(WS))/bench_env $(BENCH_ARGS)
+
+demo: build
+	@mkdir -p results
+	$(call BIN,$(WS))/map_demo --map $(ROOT)/test/data/forest0.bt --out $(ROOT)/results
+
+# The tests under AddressSanitizer + UBSan, and under ThreadSanitizer, in their own workspaces.
+test-asan: deps
+	$(call make_ws,$(ROOT)/build/ws_asan)
+	cd build/ws_asan && catkin_make -j$(JOBS) -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	  -DTOPO_PLANNER_SANITIZE=address,undefined run_tests
+	@UBSAN_OPTIONS=halt_on_error=1 /usr/bin/python3 scripts/test_summary.py $(ROOT)/build/ws_asan/build/test_results
+
+test-tsan: deps
+	$(call make_ws,$(ROOT)/build/ws_tsan)
+	cd build/ws_tsan && catkin_make -j$(JOBS) -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	  -DTOPO_PLANNER_SANITIZE=thread run_tests
+	@/usr/bin/python3 scripts/test_summary.py $(ROOT)/build/ws_tsan/build/test_results
+
+clean:
+	rm -rf build

@@ -1,0 +1,249 @@
+// Depth and point-cloud fusion on a rendered box scene, the DDA, and the scrolling window.
+#include <gtest/gtest.h>
+
+#include <random>
+#include <set>
+
+#include "plan_env/raycast.h"
+#include "test_helpers.h"
+
+namespace topo_planner {
+namespace {
+
+// Box whose faces lie in the middle of voxels (0.05 m off the grid) so no point is on a voxel border.
+const Eigen::Vector3d kBoxLo(2.05, -0.45, 0.55), kBoxHi(2.65, 0.45, 1.45);
+const Eigen::Vector3d kCamera(0.0, 0.0, 1.0);
+
+std::shared_ptr<OccupancyMap> sceneMap(int pixel_skip = 1) {
+  OccupancyMap::Config c;
+  c.size_m = {6.0, 6.0, 3.0};
+  c.origin_m = {-1.0, -3.0, -0.5};
+  c.depth_pixel_skip = pixel_skip;
+  std::string err;
+  return std::shared_ptr<OccupancyMap>(OccupancyMap::create(c, &err));
+}
+
+// Global index of the voxel containing p.
+Eigen::Vector3i vox(const OccupancyMap& m, const Eigen::Vector3d& p) { return m.geometry().indexOf(p); }
+
+TEST(Raycast, VisitsAConnectedChainBetweenTheEndVoxels) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-3.0, 3.0);
+  for (int trial = 0; trial < 500; ++trial) {
+    const Eigen::Vector3d a(u(rng), u(rng), u(rng)), b(u(rng), u(rng), u(rng));
+    std::vector<Eigen::Vector3i> chain;
+    traverseVoxels(a, b, 0.1, [&](const Eigen::Vector3i& i) {
+      chain.push_back(i);
+      return true;
+    });
+    ASSERT_EQ(chain.front(), Eigen::Vector3i((a / 0.1).array().floor().cast<int>()));
+    ASSERT_EQ(chain.back(), Eigen::Vector3i((b / 0.1).array().floor().cast<int>()));
+    for (size_t k = 1; k < chain.size(); ++k) ASSERT_EQ((chain[k] - chain[k - 1]).cwiseAbs().sum(), 1);
+    // Every voxel that dense sampling of the segment meets is in the chain.
+    std::set<std::tuple<int, int, int>> visited;
+    for (const auto& i : chain) visited.insert({i.x(), i.y(), i.z()});
+    for (int s = 0; s <= 4000; ++s) {
+      const Eigen::Vector3i i = ((a + (b - a) * (s / 4000.0)) / 0.1).array().floor().cast<int>();
+      const Eigen::Vector3d c = (i.cast<double>().array() + 0.5) * 0.1;
+      const Eigen::Vector3d p = a + (b - a) * (s / 4000.0);
+      // Skip samples within 1e-6 of a voxel face: the chain may legitimately pass the other side.
+      if (((p - c).cwiseAbs().array() > 0.05 - 1e-6).any()) continue;
+      ASSERT_TRUE(visited.count({i.x(), i.y(), i.z()})) << "trial " << trial;
+    }
+  }
+}
+
+TEST(Raycast, StopsWhenTheVisitorSaysSo) {
+  int n = 0;
+  const bool completed = traverseVoxels({0.05, 0.05, 0.05}, {1.05, 0.05, 0.05}, 0.1, [&](const Eigen::Vector3i&) {
+    return ++n < 3;
+  });
+  EXPECT_FALSE(completed);
+  EXPECT_EQ(n, 3);
+}
+
+TEST(DepthFusion, BoxFacesOccupiedRaysFreeBehindUnknown) {
+  auto map = sceneMap();
+  const PinholeCamera cam = test::smallCamera();
+  const auto T = test::cameraLookingAlongX(kCamera);
+  const auto depth = test::renderBox(cam, T, kBoxLo, kBoxHi);
+  FusionResult r;
+  for (int frame = 0; frame < 3; ++frame) {
+    r = map->fuseDepthImage(test::viewOf(depth, cam), cam, T);
+    ASSERT_EQ(r.status, MapStatus::kSuccess) << toString(r.status);
+  }
+  // The visible face x = 2.05 lies in voxel x = 20: every voxel of it is occupied.
+  for (int iy = -4; iy <= 3; ++iy)
+    for (int iz = 6; iz <= 13; ++iz) EXPECT_EQ(map->state(Eigen::Vector3i(20, iy, iz)), VoxelState::kOccupied);
+  // Free along the optical axis up to the face; the box's inside and the space behind it unknown.
+  for (double x = 0.15; x < 1.95; x += 0.1) EXPECT_EQ(map->state(Eigen::Vector3d(x, 0.01, 1.01)), VoxelState::kFree) << x;
+  EXPECT_EQ(map->state(Eigen::Vector3d(2.35, 0.01, 1.01)), VoxelState::kUnknown);
+  EXPECT_EQ(map->state(Eigen::Vector3d(3.5, 0.01, 1.01)), VoxelState::kUnknown);
+  // Nothing but the box face is occupied.
+  map->forEachOccupied([&](const Eigen::Vector3i& i) {
+    EXPECT_EQ(i.x(), 20);
+    EXPECT_TRUE(i.y() >= -5 && i.y() <= 4 && i.z() >= 5 && i.z() <= 14) << i.transpose();
+  });
+  // Rays that miss the box are cut at max range and free space up to it.
+  EXPECT_EQ(map->state(Eigen::Vector3d(3.5, 2.0, 1.01)), VoxelState::kFree);
+  // The touched box holds every update, and it is bounded by the camera's reach.
+  EXPECT_TRUE(r.touched_box.contains(Eigen::Vector3i(20, 0, 10)));
+  EXPECT_LE(r.touched_box.max.x(), 45);
+}
+
+TEST(DepthFusion, RepeatedFramesConverge) {
+  auto map = sceneMap(2);
+  const PinholeCamera cam = test::smallCamera();
+  const auto T = test::cameraLookingAlongX(kCamera);
+  const auto depth = test::renderBox(cam, T, kBoxLo, kBoxHi);
+  FusionResult r;
+  for (int frame = 0; frame < 12; ++frame) r = map->fuseDepthImage(test::viewOf(depth, cam), cam, T);
+  EXPECT_TRUE(r.changed_box.empty());  // nothing changes state any more
+  EXPECT_NEAR(map->probability(Eigen::Vector3i(20, 0, 10)), map->config().prob_max, 1e-5);
+  EXPECT_NEAR(map->probability(vox(*map, {1.0, 0.01, 1.01})), map->config().prob_min, 1e-5);
+  const std::vector<float> before = map->logOdds();
+  r = map->fuseDepthImage(test::viewOf(depth, cam), cam, T);
+  EXPECT_EQ(before, map->logOdds());  // a fixed point
+  EXPECT_GT(r.voxels_updated, 0);
+}
+
+TEST(DepthFusion, MaxRangeRaysFreeSpaceAndMarkNothingOccupied) {
+  auto map = sceneMap();
+  const PinholeCamera cam = test::smallCamera();
+  const auto T = test::cameraLookingAlongX(kCamera);
+  // Everything 10 m away (beyond the 4.5 m max range), plus a few +inf "no return" pixels.
+  std::vector<float> depth(size_t(cam.width) * cam.height, 10.0f);
+  for (size_t k = 0; k < depth.size(); k += 7) depth[k] = INFINITY;
+  const FusionResult r = map->fuseDepthImage(test::viewOf(depth, cam), cam, T);
+  ASSERT_EQ(r.status, MapStatus::kSuccess);
+  EXPECT_EQ(map->countState(VoxelState::kOccupied), 0u);
+  EXPECT_EQ(r.voxels_hit, 0);
+  EXPECT_EQ(map->state(Eigen::Vector3d(4.0, 0.01, 1.01)), VoxelState::kFree);     // 4 m: within range
+  EXPECT_EQ(map->state(Eigen::Vector3d(4.85, 0.01, 1.01)), VoxelState::kUnknown);  // 4.85 m: beyond
+}
+
+TEST(DepthFusion, MillimetreImageGivesTheSameMap) {
+  auto metres = sceneMap(), millimetres = sceneMap();
+  const PinholeCamera cam = test::smallCamera();
+  const auto T = test::cameraLookingAlongX(kCamera);
+  const auto depth = test::renderBox(cam, T, kBoxLo, kBoxHi);
+  std::vector<uint16_t> mm(depth.size());
+  for (size_t k = 0; k < depth.size(); ++k) mm[k] = std::isinf(depth[k]) ? 0 : uint16_t(std::lround(depth[k] * 1000.0));
+  DepthImageView view;
+  view.data = reinterpret_cast<const uint8_t*>(mm.data());
+  view.width = cam.width;
+  view.height = cam.height;
+  view.row_step_bytes = size_t(cam.width) * 2;
+  view.encoding = DepthEncoding::kUInt16;
+  view.depth_scale = 0.001;
+  for (int f = 0; f < 2; ++f) {
+    ASSERT_EQ(millimetres->fuseDepthImage(view, cam, T).status, MapStatus::kSuccess);
+    ASSERT_EQ(metres->fuseDepthImage(test::viewOf(depth, cam), cam, T).status, MapStatus::kSuccess);
+  }
+  // 0 = no return in 16UC1: those rays are skipped rather than freeing space, so compare the hits.
+  std::vector<Eigen::Vector3i> a, b;
+  metres->forEachOccupied([&](const Eigen::Vector3i& i) { a.push_back(i); });
+  millimetres->forEachOccupied([&](const Eigen::Vector3i& i) { b.push_back(i); });
+  EXPECT_EQ(a, b);
+  EXPECT_GT(a.size(), 50u);
+}
+
+TEST(DepthFusion, RowStepPaddingIsHonoured) {
+  auto packed = sceneMap(), padded = sceneMap();
+  const PinholeCamera cam = test::smallCamera();
+  const auto T = test::cameraLookingAlongX(kCamera);
+  const auto depth = test::renderBox(cam, T, kBoxLo, kBoxHi);
+  const int stride = cam.width + 13;  // floats per padded row
+  std::vector<float> rows(size_t(stride) * cam.height, -1.0f);
+  for (int v = 0; v < cam.height; ++v)
+    std::copy(depth.begin() + v * cam.width, depth.begin() + (v + 1) * cam.width, rows.begin() + v * stride);
+  DepthImageView view = test::viewOf(depth, cam);
+  view.data = reinterpret_cast<const uint8_t*>(rows.data());
+  view.row_step_bytes = size_t(stride) * sizeof(float);
+  packed->fuseDepthImage(test::viewOf(depth, cam), cam, T);
+  padded->fuseDepthImage(view, cam, T);
+  EXPECT_EQ(packed->logOdds(), padded->logOdds());
+}
+
+TEST(PointCloudFusion, PointsOnAFaceBecomeOccupied) {
+  auto map = sceneMap();
+  std::vector<Eigen::Vector3d> points;
+  for (double y = -0.4; y <= 0.4; y += 0.02)
+    for (double z = 0.6; z <= 1.4; z += 0.02) points.emplace_back(2.05, y, z);
+  points.emplace_back(NAN, 0.0, 0.0);
+  FusionResult r;
+  for (int f = 0; f < 2; ++f) r = map->fusePointCloud(points, kCamera);
+  ASSERT_EQ(r.status, MapStatus::kSuccess);
+  EXPECT_EQ(r.invalid, 1);
+  EXPECT_EQ(map->state(Eigen::Vector3d(2.05, 0.01, 1.01)), VoxelState::kOccupied);
+  EXPECT_EQ(map->state(Eigen::Vector3d(1.0, 0.01, 1.01)), VoxelState::kFree);
+  EXPECT_EQ(map->state(Eigen::Vector3d(2.35, 0.01, 1.01)), VoxelState::kUnknown);
+}
+
+TEST(PointCloudFusion, RayLeavingTheWindowFreesOnlyTheInsidePart) {
+  auto map = sceneMap();
+  // A return 1 m beyond the +x border of the window (x max = 5.0).
+  const FusionResult r = map->fusePointCloud({{4.0 + 2.0, 0.01, 1.01}}, {2.0, 0.01, 1.01});
+  ASSERT_EQ(r.status, MapStatus::kSuccess);
+  EXPECT_EQ(map->countState(VoxelState::kOccupied), 0u);
+  EXPECT_EQ(map->state(Eigen::Vector3d(4.95, 0.01, 1.01)), VoxelState::kFree);
+}
+
+TEST(ScrollingWindow, KeepsWhatStaysAndForgetsWhatLeaves) {
+  auto map = sceneMap();
+  ASSERT_TRUE(map->setState(vox(*map, {0.0, 0.0, 1.0}), VoxelState::kOccupied));
+  ASSERT_TRUE(map->setState(vox(*map, {-0.95, 0.0, 1.0}), VoxelState::kOccupied));
+  ASSERT_TRUE(map->setState(vox(*map, {4.95, 2.95, 2.45}), VoxelState::kFree));
+  // Move 1 m along +x: the voxel at x = -0.95 leaves, the one at x = 0 stays.
+  const Eigen::Vector3i old_origin = map->geometry().originIndex();
+  map->setOriginIndex(old_origin + Eigen::Vector3i(10, 0, 0));
+  EXPECT_EQ(map->state(Eigen::Vector3d(0.0, 0.0, 1.0)), VoxelState::kOccupied);
+  EXPECT_EQ(map->state(Eigen::Vector3d(-0.95, 0.0, 1.0)), VoxelState::kOutOfMap);
+  EXPECT_EQ(map->state(Eigen::Vector3d(4.95, 2.95, 2.45)), VoxelState::kFree);
+  // The entering slab (x in [5, 6)) reuses the leaving slots and starts unknown.
+  for (double y = -2.95; y < 3.0; y += 0.5) EXPECT_EQ(map->state(Eigen::Vector3d(5.55, y, 1.0)), VoxelState::kUnknown);
+  EXPECT_EQ(map->countState(VoxelState::kOccupied), 1u);
+  // Coming back: the voxel that left is forgotten, the one that stayed is kept.
+  map->setOriginIndex(old_origin);
+  EXPECT_EQ(map->state(Eigen::Vector3d(-0.95, 0.0, 1.0)), VoxelState::kUnknown);
+  EXPECT_EQ(map->state(Eigen::Vector3d(0.0, 0.0, 1.0)), VoxelState::kOccupied);
+  // A jump larger than the window forgets everything.
+  map->recenter({100.0, 100.0, 1.0});
+  EXPECT_EQ(map->countState(VoxelState::kOccupied), 0u);
+  EXPECT_EQ(map->countState(VoxelState::kFree), 0u);
+  EXPECT_TRUE(map->geometry().inWindow(Eigen::Vector3d(100.0, 100.0, 1.0)));
+}
+
+TEST(ScrollingWindow, FusionAfterScrollMatchesAFreshMapAtThatWindow) {
+  auto scrolled = sceneMap();
+  scrolled->setOriginIndex(scrolled->geometry().originIndex() + Eigen::Vector3i(-7, 4, 1));
+  OccupancyMap::Config c = scrolled->config();
+  c.origin_m = scrolled->geometry().windowMin();
+  std::string err;
+  auto fresh = OccupancyMap::create(c, &err);
+  const PinholeCamera cam = test::smallCamera();
+  const auto T = test::cameraLookingAlongX(kCamera);
+  const auto depth = test::renderBox(cam, T, kBoxLo, kBoxHi);
+  scrolled->fuseDepthImage(test::viewOf(depth, cam), cam, T);
+  fresh->fuseDepthImage(test::viewOf(depth, cam), cam, T);
+  const VoxelBox w = fresh->geometry().windowBox();
+  ASSERT_EQ(w, scrolled->geometry().windowBox());
+  Eigen::Vector3i i;
+  for (i.z() = w.min.z(); i.z() <= w.max.z(); ++i.z())
+    for (i.y() = w.min.y(); i.y() <= w.max.y(); ++i.y())
+      for (i.x() = w.min.x(); i.x() <= w.max.x(); ++i.x()) ASSERT_EQ(scrolled->state(i), fresh->state(i));
+}
+
+TEST(OccupancyMap, MemoryStaysSmallForALargeMap) {
+  OccupancyMap::Config c;
+  c.size_m = {40.0, 20.0, 5.0};
+  std::string err;
+  auto map = OccupancyMap::create(c, &err);
+  ASSERT_TRUE(map) << err;
+  const size_t bytes = map->logOdds().capacity() * sizeof(float) + map->geometry().numVoxels() * sizeof(uint32_t);
+  EXPECT_EQ(map->geometry().numVoxels(), 400u * 200u * 50u);
+  EXPECT_LT(bytes, 40u * 1024u * 1024u);  // 8 bytes a voxel: 32 MB for 4M voxels
+}
+
+}  // namespace
+}  // namespace topo_planner
