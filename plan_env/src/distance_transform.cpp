@@ -1,6 +1,7 @@
 #include "plan_env/distance_transform.h"
 
 #include <algorithm>
+#include <cmath>
 
 namespace topo_planner {
 
@@ -55,6 +56,34 @@ void binaryLineTransform(const uint8_t* site, int32_t* d, int n, int32_t cap) {
     const int64_t r = std::min(d[i], last - i);
     const int64_t r2 = r * r;
     d[i] = r2 >= cap ? kNoSite : int32_t(r2);
+  }
+}
+
+void binaryLineTransformPair(const uint8_t* site, float* pos, float* neg, int n, int32_t cap) {
+  // Forward sweep: distance to the last site / non-site seen; backward sweep: the next one.
+  constexpr int kFar = 1 << 20;
+  int last_site = -kFar, last_free = -kFar;
+  for (int i = 0; i < n; ++i) {
+    if (site[i]) {
+      last_site = i;
+    } else {
+      last_free = i;
+    }
+    pos[i] = float(i - last_site);
+    neg[i] = float(i - last_free);
+  }
+  int next_site = n + kFar, next_free = n + kFar;
+  const float fcap = float(cap);
+  for (int i = n - 1; i >= 0; --i) {
+    if (site[i]) {
+      next_site = i;
+    } else {
+      next_free = i;
+    }
+    const float p = std::min(pos[i], float(next_site - i));
+    const float q = std::min(neg[i], float(next_free - i));
+    pos[i] = p * p < fcap ? p * p : INFINITY;
+    neg[i] = q * q < fcap ? q * q : INFINITY;
   }
 }
 

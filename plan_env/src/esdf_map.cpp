@@ -95,6 +95,7 @@ void EsdfMap::compute(const VoxelBox& in, const VoxelBox& out) {
       s.site.resize(longest);
       s.row_a.resize(longest);
       s.row_b.resize(longest);
+      s.row_c.resize(longest);
     }
     if (s.plane.size() < size_t(n.x()) * size_t(n.y())) s.plane.resize(size_t(n.x()) * size_t(n.y()));
   }
@@ -126,26 +127,38 @@ void EsdfMap::firstPassAlongX(const VoxelBox& in) {
     const int y = line % ny, z = line / ny;
     const size_t start = size_t(nx) * (size_t(y) + size_t(ny) * size_t(z));
     occ.readSiteLineX(in.min + Eigen::Vector3i(0, y, z), nx, unknown_site, s.site.data());
-    for (int field = 0; field < 2; ++field) {
-      if (field == 1)
-        for (int x = 0; x < nx; ++x) s.site[size_t(x)] ^= 1;
-      binaryLineTransform(s.site.data(), s.d.data(), nx, cap);
-      float* dst = (field == 0 ? pos_sq_.data() : neg_sq_.data()) + start;
-      for (int x = 0; x < nx; ++x) dst[x] = s.d[size_t(x)] >= kNoSite ? INFINITY : float(s.d[size_t(x)]);
-    }
+    binaryLineTransformPair(s.site.data(), pos_sq_.data() + start, neg_sq_.data() + start, nx, cap);
   });
 }
 
 namespace {
 
-// out[x] = min over |r| <= radius, 0 <= i + r < count of rows[i + r][x] + r^2, for x in [0, n).
-// rows(k) returns row k. The inner loops are plain element-wise min/add: the compiler vectorises them.
+// Largest value of a row, counting values at or beyond the truncation as the truncation.
+// Written as an element-wise max over 8 lanes, which vectorises (a plain float max reduction
+// does not without -ffast-math), then reduced.
+float rowMax(const float* v, int n, float cap) {
+  float lanes[8] = {0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f};
+  int x = 0;
+  for (; x + 8 <= n; x += 8)
+    for (int k = 0; k < 8; ++k) lanes[k] = std::max(lanes[k], v[x + k]);
+  float m = 0.0f;
+  for (; x < n; ++x) m = std::max(m, v[x]);
+  for (float l : lanes) m = std::max(m, l);
+  return std::min(m, cap);
+}
+
+// out[x] = min over |r| <= radius, 0 <= i + r < count of rows(i + r)[x] + r^2, for x in [0, n),
+// where rows(k) returns row k. The window stops at the r whose r^2 reaches the largest value of the
+// centre row: the result is at most that row, so no farther row can lower it. The inner loops are
+// plain element-wise min/add, which the compiler vectorises.
 template <typename RowFn>
-void windowedMinRow(RowFn&& rows, int i, int count, int radius, int n, float* out) {
+void windowedMinRow(RowFn&& rows, int i, int count, int radius, int n, float cap, float* out) {
   const float* centre = rows(i);
   std::copy(centre, centre + n, out);
+  const float m = rowMax(centre, n, cap);
   for (int r = 1; r <= radius; ++r) {
     const float r2 = float(r) * float(r);
+    if (r2 >= m) break;
     if (i - r >= 0) {
       const float* a = rows(i - r);
       for (int x = 0; x < n; ++x) out[x] = std::min(out[x], a[x] + r2);
@@ -155,13 +168,6 @@ void windowedMinRow(RowFn&& rows, int i, int count, int radius, int n, float* ou
       for (int x = 0; x < n; ++x) out[x] = std::min(out[x], b[x] + r2);
     }
   }
-}
-
-// The window a set of values needs: no r with r^2 >= max finite value can lower any of them.
-int windowRadius(const float* v, size_t count, float cap, int cap_radius) {
-  float m = 0.0f;
-  for (size_t k = 0; k < count; ++k) m = std::max(m, std::min(v[k], cap));
-  return std::min(cap_radius, int(std::ceil(std::sqrt(m))));
 }
 
 }  // namespace
@@ -177,10 +183,9 @@ void EsdfMap::computeWindowed(const VoxelBox& in, const VoxelBox& out) {
   forLines(nz, [&](int z, LineScratch& s) {
     for (std::vector<float>* field : {&pos_sq_, &neg_sq_}) {
       float* f = field->data() + size_t(z) * plane;
-      const int radius = windowRadius(f, plane, cap, cap_radius);
-      if (radius == 0) continue;
       for (int y = 0; y < ny; ++y)
-        windowedMinRow([&](int k) { return f + size_t(k) * nx; }, y, ny, radius, nx, s.plane.data() + size_t(y) * nx);
+        windowedMinRow([&](int k) { return f + size_t(k) * nx; }, y, ny, cap_radius, nx, cap,
+                       s.plane.data() + size_t(y) * nx);
       std::copy(s.plane.data(), s.plane.data() + plane, f);
     }
   });
@@ -194,9 +199,9 @@ void EsdfMap::computeWindowed(const VoxelBox& in, const VoxelBox& out) {
     auto pos_rows = [&](int k) { return pos_sq_.data() + size_t(k) * plane + size_t(y) * nx + ox0; };
     auto neg_rows = [&](int k) { return neg_sq_.data() + size_t(k) * plane + size_t(y) * nx + ox0; };
     for (int z = oz0; z < oz0 + onz; ++z) {
-      windowedMinRow(pos_rows, z, nz, cap_radius, onx, s.row_a.data());
-      windowedMinRow(neg_rows, z, nz, windowRadius(neg_rows(z), size_t(onx), cap, cap_radius), onx, s.row_b.data());
-      writeRow(in.min + Eigen::Vector3i(ox0, y, z), onx, s.row_a.data(), s.row_b.data());
+      windowedMinRow(pos_rows, z, nz, cap_radius, onx, cap, s.row_a.data());
+      windowedMinRow(neg_rows, z, nz, cap_radius, onx, cap, s.row_b.data());
+      writeRow(in.min + Eigen::Vector3i(ox0, y, z), onx, s.row_a.data(), s.row_b.data(), s.row_c.data());
     }
   });
 }
@@ -248,31 +253,29 @@ void EsdfMap::computeEnvelope(const VoxelBox& in, const VoxelBox& out) {
     transform(neg_sq_, false, start, stride, nz, s);
     for (int i = 0; i < nz; ++i) s.row_b[size_t(i)] = toFloat(s.f[size_t(i)]);
     for (int z = oz0; z < oz0 + onz; ++z)
-      writeRow(in.min + Eigen::Vector3i(x, y, z), 1, &s.row_a[size_t(z)], &s.row_b[size_t(z)]);
+      writeRow(in.min + Eigen::Vector3i(x, y, z), 1, &s.row_a[size_t(z)], &s.row_b[size_t(z)], s.row_c.data());
   });
 }
 
-void EsdfMap::writeRow(const Eigen::Vector3i& first, int n, const float* pos_sq, const float* neg_sq) {
+void EsdfMap::writeRow(const Eigen::Vector3i& first, int n, const float* pos_sq, const float* neg_sq, float* tmp) {
   const float res = float(geometry().resolution());
   const float max_d = float(config_.max_distance_m);
   const float cap = float(cap_sq_voxels_);
-  // Consecutive x are consecutive addresses except where the ring buffer wraps.
+  // Branch-free so that it vectorises: sqrt(cap) * res >= max_d, so clamping the square at cap
+  // and the distance at max_d gives the truncated value.
+  for (int i = 0; i < n; ++i) {
+    const float p = std::min(max_d, std::sqrt(std::min(pos_sq[i], cap)) * res);
+    const float q = std::min(max_d, std::sqrt(std::min(neg_sq[i], cap)) * res);
+    tmp[i] = pos_sq[i] > 0.0f ? p : -q;
+  }
+  // Consecutive x are consecutive addresses except where the ring buffer wraps (at most once).
   const int sx = geometry().size().x();
   const size_t addr = geometry().address(first);
   float* row = distance_.data() + (addr - addr % size_t(sx));
-  int ring_x = int(addr % size_t(sx));
-  for (int i = 0; i < n; ++i) {
-    const float p = pos_sq[i];
-    float d;
-    if (p > 0.0f) {
-      d = p >= cap ? max_d : std::min(max_d, std::sqrt(p) * res);
-    } else {
-      const float q = neg_sq[i];
-      d = -(q >= cap ? max_d : std::min(max_d, std::sqrt(q) * res));
-    }
-    row[ring_x] = d;
-    if (++ring_x == sx) ring_x = 0;
-  }
+  const int ring_x = int(addr % size_t(sx));
+  const int before_wrap = std::min(n, sx - ring_x);
+  std::copy(tmp, tmp + before_wrap, row + ring_x);
+  std::copy(tmp + before_wrap, tmp + n, row);
 }
 
 QueryStatus EsdfMap::distance(const Eigen::Vector3i& index, double* distance) const {

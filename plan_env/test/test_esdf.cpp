@@ -85,6 +85,16 @@ TEST(DistanceTransform, BinaryLineMatchesBruteForce) {
         if (site[p]) best = std::min(best, (q - p) * (q - p));
       ASSERT_EQ(d[q], best >= cap ? kNoSite : best) << "trial " << trial << " q " << q;
     }
+    // The pair version: the same for the sites, and for the non-sites.
+    std::vector<float> pos(n), neg(n);
+    binaryLineTransformPair(site.data(), pos.data(), neg.data(), n, cap);
+    for (int q = 0; q < n; ++q) {
+      int32_t best_free = kNoSite;
+      for (int p = 0; p < n; ++p)
+        if (!site[p]) best_free = std::min(best_free, (q - p) * (q - p));
+      ASSERT_EQ(pos[q], d[q] >= kNoSite ? INFINITY : float(d[q]));
+      ASSERT_EQ(neg[q], best_free >= cap ? INFINITY : float(best_free));
+    }
   }
 }
 

@@ -42,7 +42,9 @@ inline std::vector<float> renderDepth(const OccupancyMap& truth, const PinholeCa
         const double a = (lo[k] - o[k]) / dir[k], b = (hi[k] - o[k]) / dir[k];
         t_enter = std::max(t_enter, std::min(a, b));
       }
-      depth[size_t(v) * cam.width + u] = float(t_enter);  // ray_c.z = 1, so t is the depth
+      // A millimetre past the face, so that the measured point lies in the hit voxel, as a real
+      // surface point would.
+      depth[size_t(v) * cam.width + u] = float(t_enter + 1e-3 / dir.norm());  // ray_c.z = 1: t is the depth
     }
   return depth;
 }

@@ -20,6 +20,10 @@ void lowerEnvelopeTransform(const int32_t* f, int32_t* d, int n, int32_t* v, int
 /// none, and for distances of `cap` or more).
 void binaryLineTransform(const uint8_t* site, int32_t* d, int n, int32_t cap);
 
+/// Both fields of a site line in one go, as floats: pos[i] = squared distance to the nearest site,
+/// neg[i] = to the nearest non-site; +inf when there is none closer than sqrt(cap) cells.
+void binaryLineTransformPair(const uint8_t* site, float* pos, float* neg, int n, int32_t cap);
+
 /// d[q] = min(lowerEnvelopeTransform(f)[q], cap), by a search around each sample that stops once
 /// (q - p)^2 reaches the best value. Linear-time when values are small, as in the negative field,
 /// where most samples are 0 and the rest are near a 0; a sample with f[q] == 0 costs nothing.

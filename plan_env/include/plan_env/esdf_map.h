@@ -96,7 +96,7 @@ class EsdfMap {
   struct LineScratch;
   void forLines(int lines, const std::function<void(int line, LineScratch& s)>& fn);
   // Writes the signed, truncated distance of one output row from squared voxel distances.
-  void writeRow(const Eigen::Vector3i& first, int n, const float* pos_sq, const float* neg_sq);
+  void writeRow(const Eigen::Vector3i& first, int n, const float* pos_sq, const float* neg_sq, float* scratch);
 
   Config config_;
   std::shared_ptr<const OccupancyMap> occupancy_;
@@ -113,7 +113,7 @@ class EsdfMap {
     std::vector<int32_t> f, d, v;
     std::vector<int64_t> zn, zd;
     std::vector<uint8_t> site;
-    std::vector<float> row_a, row_b, plane;
+    std::vector<float> row_a, row_b, row_c, plane;
   };
   std::vector<LineScratch> scratch_;
 };
