@@ -11,12 +11,13 @@ BIN = $(1)/devel/lib/topo_planner
 deps:
 	@bash scripts/install_deps.sh
 
-# A catkin workspace under build/ whose src/ links to this repository. build/CATKIN_IGNORE keeps a
-# workspace that holds this repository in its own src/ from finding the package twice.
+# A catkin workspace under build/ whose src/topo_planner links to this repository's entries (see
+# scripts/link_workspace.sh). build/CATKIN_IGNORE keeps a workspace that holds this repository in its
+# own src/ from finding the package twice.
 define make_ws
 	@mkdir -p $(1)/src
 	@touch $(ROOT)/build/CATKIN_IGNORE
-	@ln -sfn $(ROOT) $(1)/src/topo_planner
+	@bash scripts/link_workspace.sh $(ROOT) $(1)/src/topo_planner
 endef
 
 build: deps

@@ -88,8 +88,8 @@ int main(int argc, char** argv) {
     }
     if (threads == 2) esdf2 = std::move(esdf);
   }
-  row("ours, FH signed ESDF, 1 thread", "full ESDF (both signs)", ours1);
-  row("ours, FH signed ESDF, 2 threads", "full ESDF (both signs)", ours2);
+  row("ours, signed ESDF, 1 thread", "full ESDF (both signs)", ours1);
+  row("ours, signed ESDF, 2 threads", "full ESDF (both signs)", ours2);
 
   // DynamicEDT3D from the same octree, same box, same maximum distance.
   octomap::OcTree tree(0.1);
