@@ -74,6 +74,13 @@ class EsdfMap {
 
   /// Distance at a voxel centre (kUnknown still gives the value computed with unknown as free).
   QueryStatus distance(const Eigen::Vector3i& index, double* distance) const;
+  /// Distance at a voxel centre, no unknown check: false when out of the window. The fast path
+  /// of collision checks.
+  bool voxelDistance(const Eigen::Vector3i& index, float* distance) const {
+    if (!geometry().inWindow(index)) return false;
+    *distance = distance_[geometry().address(index)];
+    return true;
+  }
   /// Trilinearly interpolated distance and its gradient. kOutOfMap when any of the 8 voxels
   /// around the point is outside the window; kUnknown when one is unknown (values still filled).
   DistanceQuery query(const Eigen::Vector3d& point) const;

@@ -1,0 +1,281 @@
+// The topological search on synthetic scenes: the paper's claims as checkable facts.
+#include <gtest/gtest.h>
+#include <malloc.h>
+
+#include <atomic>
+#include <new>
+
+#include "path_searching/grid_astar.h"
+#include "path_searching/topo_path_search.h"
+#include "scenes.h"
+
+// Live heap bytes of this test binary, for the memory test.
+static std::atomic<long long> g_live_bytes{0};
+void* operator new(size_t n) {
+  void* p = std::malloc(n ? n : 1);
+  if (!p) throw std::bad_alloc();
+  g_live_bytes += (long long)malloc_usable_size(p);
+  return p;
+}
+void operator delete(void* p) noexcept {
+  if (!p) return;
+  g_live_bytes -= (long long)malloc_usable_size(p);
+  std::free(p);
+}
+void operator delete(void* p, size_t) noexcept { operator delete(p); }
+
+namespace topo_planner {
+namespace {
+
+TopoPathSearch::Config searchConfig(int samples = 400) {
+  TopoPathSearch::Config c;
+  c.clearance_m = 0.3;
+  c.roadmap.max_samples = samples;
+  c.seed = 7;
+  return c;
+}
+
+// True when every segment keeps the clearance.
+bool collisionFree(const Path& p, const EsdfMap& map, double clearance) {
+  const VisibilityChecker checker(map, clearance, true);
+  for (size_t i = 1; i < p.size(); ++i)
+    if (!checker.lineVisible(p[i - 1], p[i])) return false;
+  return true;
+}
+
+// Lateral (y) offset of the path where it crosses x = x0.
+double yAtX(const Path& p, double x0) {
+  for (size_t i = 1; i < p.size(); ++i)
+    if ((p[i - 1].x() - x0) * (p[i].x() - x0) <= 0.0 && p[i].x() != p[i - 1].x())
+      return p[i - 1].y() + (p[i].y() - p[i - 1].y()) * (x0 - p[i - 1].x()) / (p[i].x() - p[i - 1].x());
+  return NAN;
+}
+Eigen::Vector3d pointAtX(const Path& p, double x0) {
+  for (size_t i = 1; i < p.size(); ++i)
+    if ((p[i - 1].x() - x0) * (p[i].x() - x0) <= 0.0 && p[i].x() != p[i - 1].x())
+      return p[i - 1] + (p[i] - p[i - 1]) * ((x0 - p[i - 1].x()) / (p[i].x() - p[i - 1].x()));
+  return Eigen::Vector3d::Constant(NAN);
+}
+
+void expectPairwiseDistinct(const std::vector<Path>& paths, const EsdfMap& map, double clearance) {
+  const VisibilityChecker checker(map, clearance, true);
+  for (size_t a = 0; a < paths.size(); ++a)
+    for (size_t b = a + 1; b < paths.size(); ++b)
+      EXPECT_FALSE(uniformVisibilityEquivalent(paths[a], paths[b], checker)) << a << " vs " << b;
+}
+
+TEST(TopoSearch, FreeStraightLineGivesTheSegment) {
+  test::Scene scene({10.0, 8.0, 3.0});
+  const EsdfMap& map = scene.finish();
+  TopoPathSearch search(searchConfig());
+  const Eigen::Vector3d s(1, 4, 1.5), g(9, 4, 1.5);
+  const TopoSearchResult r = search.search(map, s, g);
+  ASSERT_EQ(r.status, SearchStatus::kSuccess);
+  ASSERT_EQ(r.paths.size(), 1u);
+  ASSERT_EQ(r.paths[0].size(), 2u);
+  EXPECT_TRUE(r.paths[0][0].isApprox(s));
+  EXPECT_TRUE(r.paths[0][1].isApprox(g));
+}
+
+TEST(TopoSearch, OnePillarGivesLeftAndRight) {
+  test::Scene scene({10.0, 8.0, 3.0});
+  scene.pillar(5.0, 4.0, 0.5);
+  const EsdfMap& map = scene.finish();
+  TopoPathSearch search(searchConfig());
+  const TopoSearchResult r = search.search(map, {1, 4, 1.5}, {9, 4, 1.5});
+  ASSERT_EQ(r.status, SearchStatus::kSuccess) << toString(r.status);
+  ASSERT_EQ(r.paths.size(), 2u);
+  const double y0 = yAtX(r.paths[0], 5.0), y1 = yAtX(r.paths[1], 5.0);
+  // One passes on each side, clear of the pillar: radius 0.5 + clearance 0.3, less one voxel
+  // (clearance is measured between voxel centres).
+  EXPECT_LT(std::min(y0, y1), 4.0 - 0.7);
+  EXPECT_GT(std::max(y0, y1), 4.0 + 0.7);
+  for (const Path& p : r.paths) EXPECT_TRUE(collisionFree(p, map, 0.3));
+  expectPairwiseDistinct(r.paths, map, 0.3);
+  EXPECT_GT(r.stats.roadmap.guards, 2);
+  EXPECT_GE(r.stats.raw_paths, 2);
+  // Shortened paths hug the pillar: not much longer than the straight line.
+  for (const Path& p : r.paths) EXPECT_LT(pathLength(p), 8.0 * 1.12);
+}
+
+TEST(TopoSearch, WallWithTwoWindowsGivesOnePathThroughEach) {
+  test::Scene scene({10.0, 8.0, 4.0});
+  // Wall x in [4.85, 5.15] across the whole map, with two 1.2 m windows centred at y = 2 and 6, z = 2.
+  scene.fill([](const Eigen::Vector3d& p) {
+    if (p.x() < 4.85 || p.x() > 5.15) return false;
+    const bool in_window = std::abs(p.z() - 2.0) < 0.6 && (std::abs(p.y() - 2.0) < 0.6 || std::abs(p.y() - 6.0) < 0.6);
+    return !in_window;
+  });
+  const EsdfMap& map = scene.finish();
+  TopoPathSearch search(searchConfig(600));
+  const TopoSearchResult r = search.search(map, {2, 4, 2}, {8, 4, 2});
+  ASSERT_EQ(r.status, SearchStatus::kSuccess) << toString(r.status);
+  ASSERT_EQ(r.paths.size(), 2u);
+  // Each passes the wall inside one of the openings (|y - centre| < 0.6, |z - 2| < 0.6).
+  std::vector<Eigen::Vector3d> at_wall{pointAtX(r.paths[0], 5.0), pointAtX(r.paths[1], 5.0)};
+  std::sort(at_wall.begin(), at_wall.end(), [](const auto& a, const auto& b) { return a.y() < b.y(); });
+  EXPECT_LT(std::abs(at_wall[0].y() - 2.0), 0.6);
+  EXPECT_LT(std::abs(at_wall[1].y() - 6.0), 0.6);
+  for (const auto& p : at_wall) EXPECT_LT(std::abs(p.z() - 2.0), 0.6);
+  for (const Path& p : r.paths) EXPECT_TRUE(collisionFree(p, map, 0.3));
+}
+
+TEST(TopoSearch, FloatingBoxOverUnderLeftRight) {
+  test::Scene scene({10.0, 8.0, 4.0});
+  scene.box({4.2, 3.2, 1.4}, {5.8, 4.8, 2.6});
+  const EsdfMap& map = scene.finish();
+  TopoPathSearch::Config c = searchConfig(800);
+  c.roadmap.sample_inflation_m = {1.0, 2.5, 1.8};
+  TopoPathSearch search(c);
+  const TopoSearchResult r = search.search(map, {1.5, 4, 2}, {8.5, 4, 2});
+  ASSERT_EQ(r.status, SearchStatus::kSuccess) << toString(r.status);
+  bool over = false, under = false, left = false, right = false;
+  for (const Path& p : r.paths) {
+    const Eigen::Vector3d q = pointAtX(p, 5.0);
+    over |= q.z() > 2.6;
+    under |= q.z() < 1.4;
+    left |= q.y() > 4.8;
+    right |= q.y() < 3.2;
+    EXPECT_TRUE(collisionFree(p, map, 0.3));
+  }
+  EXPECT_TRUE(over && under && left && right) << over << under << left << right << " of " << r.paths.size();
+  expectPairwiseDistinct(r.paths, map, 0.3);
+}
+
+TEST(TopoSearch, VerticalStartToGoalDirectionWorks) {
+  test::Scene scene({6.0, 6.0, 6.0});
+  scene.box({2.0, 2.0, 2.8}, {4.0, 4.0, 3.2});  // a slab between start and goal
+  const EsdfMap& map = scene.finish();
+  TopoPathSearch::Config c = searchConfig(600);
+  c.roadmap.sample_inflation_m = {0.5, 2.0, 2.0};
+  TopoPathSearch search(c);
+  const TopoSearchResult r = search.search(map, {3, 3, 1}, {3, 3, 5});
+  ASSERT_EQ(r.status, SearchStatus::kSuccess) << toString(r.status);
+  EXPECT_GE(r.paths.size(), 2u);
+  for (const Path& p : r.paths) EXPECT_TRUE(collisionFree(p, map, 0.3));
+}
+
+TEST(TopoSearch, ShorteningIsSafeNotLongerAndEquivalent) {
+  test::Scene scene({10.0, 8.0, 3.0});
+  scene.pillar(5.0, 4.0, 0.5);
+  scene.pillar(3.0, 2.5, 0.4);
+  scene.pillar(7.0, 5.8, 0.4);
+  const EsdfMap& map = scene.finish();
+  TopoPathSearch::Config c = searchConfig(600);
+  c.keep_raw_paths = true;
+  TopoPathSearch search(c);
+  const TopoSearchResult r = search.search(map, {1, 4, 1.5}, {9, 4, 1.5});
+  ASSERT_EQ(r.status, SearchStatus::kSuccess);
+  ASSERT_GE(r.raw_paths.size(), 3u);
+  const VisibilityChecker checker(map, 0.3, true);
+  const PathShortener shortener(checker);
+  int shortened = 0;
+  for (const Path& raw : r.raw_paths) {
+    ASSERT_TRUE(collisionFree(raw, map, 0.3));
+    bool fell_back = false;
+    const Path s = shortener.shorten(raw, &fell_back);
+    EXPECT_TRUE(collisionFree(s, map, 0.3));
+    EXPECT_LE(pathLength(s), pathLength(raw) + 1e-9);
+    EXPECT_TRUE(uniformVisibilityEquivalent(s, raw, checker));
+    EXPECT_TRUE(s.front().isApprox(raw.front()) && s.back().isApprox(raw.back()));
+    shortened += !fell_back && pathLength(s) < pathLength(raw) - 1e-6;
+  }
+  EXPECT_GT(shortened, int(r.raw_paths.size()) / 2);  // it really shortens
+  // A deliberate detour is shortened towards the pillar but stays on its side.
+  const Path detour{{1, 4, 1.5}, {2, 7.5, 1.5}, {8, 7.5, 1.5}, {9, 4, 1.5}};
+  const Path s = shortener.shorten(detour);
+  EXPECT_LT(pathLength(s), pathLength(detour) - 1.0);
+  EXPECT_GT(yAtX(s, 5.0), 4.0);
+}
+
+TEST(TopoSearch, BadInputsGetTheirStatus) {
+  test::Scene scene({10.0, 8.0, 3.0});
+  scene.pillar(5.0, 4.0, 0.5);
+  const EsdfMap& map = scene.finish();
+  TopoPathSearch search(searchConfig());
+  EXPECT_EQ(search.search(map, {5, 4, 1.5}, {9, 4, 1.5}).status, SearchStatus::kStartInObstacle);
+  EXPECT_EQ(search.search(map, {1, 4, 1.5}, {5.2, 4, 1.5}).status, SearchStatus::kGoalInObstacle);
+  EXPECT_EQ(search.search(map, {1, 4, 1.5}, {19, 4, 1.5}).status, SearchStatus::kOutOfMap);
+  EXPECT_EQ(search.search(map, {-1, 4, 1.5}, {9, 4, 1.5}).status, SearchStatus::kOutOfMap);
+  EXPECT_EQ(search.search(map, {NAN, 4, 1.5}, {9, 4, 1.5}).status, SearchStatus::kInvalidInput);
+  EXPECT_EQ(search.search(map, {1, 4, INFINITY}, {9, 4, 1.5}).status, SearchStatus::kInvalidInput);
+  EXPECT_EQ(search.search(map, {1, 4, 1.5}, {1, 4, 1.5}).status, SearchStatus::kInvalidInput);
+  TopoPathSearch::Config bad = searchConfig();
+  bad.max_paths = 0;
+  EXPECT_EQ(TopoPathSearch(bad).search(map, {1, 4, 1.5}, {9, 4, 1.5}).status, SearchStatus::kInvalidInput);
+  // One sample cannot connect around the pillar.
+  EXPECT_EQ(TopoPathSearch(searchConfig(1)).search(map, {1, 4, 1.5}, {9, 4, 1.5}).status,
+            SearchStatus::kBudgetExhausted);
+}
+
+TEST(TopoSearch, SameSeedSameResult) {
+  test::Scene scene({10.0, 8.0, 3.0});
+  scene.pillar(5.0, 4.0, 0.5);
+  scene.pillar(3.0, 2.5, 0.4);
+  const EsdfMap& map = scene.finish();
+  TopoPathSearch a(searchConfig()), b(searchConfig());
+  const TopoSearchResult ra = a.search(map, {1, 4, 1.5}, {9, 4, 1.5});
+  const TopoSearchResult rb1 = b.search(map, {1, 4, 1.5}, {9, 4, 1.5});
+  const TopoSearchResult rb2 = b.search(map, {1, 4, 1.5}, {9, 4, 1.5});
+  ASSERT_EQ(ra.paths.size(), rb1.paths.size());
+  for (size_t i = 0; i < ra.paths.size(); ++i) {
+    EXPECT_EQ(ra.paths[i], rb1.paths[i]);
+    EXPECT_EQ(rb1.paths[i], rb2.paths[i]);
+  }
+  TopoPathSearch::Config other = searchConfig();
+  other.seed = 8;
+  const TopoSearchResult rc = TopoPathSearch(other).search(map, {1, 4, 1.5}, {9, 4, 1.5});
+  EXPECT_EQ(rc.status, SearchStatus::kSuccess);  // another seed samples differently but still succeeds
+  EXPECT_GE(rc.paths.size(), 2u);
+}
+
+TEST(TopoSearch, MemoryDoesNotGrowOver10000Calls) {
+  test::Scene scene({6.0, 4.0, 2.0});
+  scene.pillar(3.0, 2.0, 0.4);
+  const EsdfMap& map = scene.finish();
+  TopoPathSearch::Config c = searchConfig(60);
+  c.roadmap.sample_inflation_m = {0.5, 1.5, 0.5};
+  TopoPathSearch search(c);
+  search.search(map, {0.8, 2, 1}, {5.2, 2, 1});  // the first call sizes the reusable buffers
+  const long long before = g_live_bytes.load();
+  int found = 0;
+  for (int i = 0; i < 10000; ++i) found += search.search(map, {0.8, 2, 1}, {5.2, 2, 1}).status == SearchStatus::kSuccess;
+  EXPECT_EQ(g_live_bytes.load(), before);
+  EXPECT_EQ(found, 10000);
+}
+
+TEST(GridAStar, FindsACollisionFreeNearShortestPath) {
+  test::Scene scene({10.0, 8.0, 3.0});
+  scene.pillar(5.0, 4.0, 0.5);
+  const EsdfMap& map = scene.finish();
+  GridAStar::Config c;
+  c.clearance_m = 0.3;
+  GridAStar astar(c);
+  const GridAStar::Result r = astar.search(map, {1, 4, 1.5}, {9, 4, 1.5});
+  ASSERT_EQ(r.status, SearchStatus::kSuccess);
+  const VisibilityChecker checker(map, 0.3, true);
+  for (const auto& p : r.path) EXPECT_TRUE(checker.isFree(p));
+  EXPECT_LT(pathLength(r.path), 8.0 * 1.25);
+  EXPECT_GT(r.expansions, 0);
+  // Repeated searches reuse the buffers and give the same path.
+  EXPECT_EQ(astar.search(map, {1, 4, 1.5}, {9, 4, 1.5}).path, r.path);
+}
+
+TEST(GridAStar, ReportsNoPathBudgetAndObstacles) {
+  test::Scene scene({10.0, 8.0, 3.0});
+  scene.box({4.8, -1.0, -1.0}, {5.2, 9.0, 4.0});  // a wall with no opening
+  const EsdfMap& map = scene.finish();
+  GridAStar::Config c;
+  c.search_margin_m = 1.0;
+  GridAStar astar(c);
+  EXPECT_EQ(astar.search(map, {1, 4, 1.5}, {9, 4, 1.5}).status, SearchStatus::kNoPath);
+  EXPECT_EQ(astar.search(map, {5, 4, 1.5}, {9, 4, 1.5}).status, SearchStatus::kStartInObstacle);
+  EXPECT_EQ(astar.search(map, {1, 4, 1.5}, {5, 4, 1.5}).status, SearchStatus::kGoalInObstacle);
+  EXPECT_EQ(astar.search(map, {1, 4, 1.5}, {90, 4, 1.5}).status, SearchStatus::kOutOfMap);
+  EXPECT_EQ(astar.search(map, {NAN, 4, 1.5}, {9, 4, 1.5}).status, SearchStatus::kInvalidInput);
+  c.max_expansions = 10;
+  EXPECT_EQ(GridAStar(c).search(map, {1, 4, 1.5}, {4, 4, 1.5}).status, SearchStatus::kBudgetExhausted);
+}
+
+}  // namespace
+}  // namespace topo_planner
