@@ -6,7 +6,7 @@ WS := $(ROOT)/build/ws
 CATKIN_ARGS := -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=Release
 BIN = $(1)/devel/lib/topo_planner
 
-.PHONY: deps build test bench bench-env demo test-asan test-tsan clean
+.PHONY: deps build test bench bench-env bench-topo demo test-asan test-tsan clean
 
 deps:
 	@bash scripts/install_deps.sh
@@ -30,10 +30,13 @@ test: build
 	cd $(WS) && catkin_make -j$(JOBS) $(CATKIN_ARGS) run_tests
 	@/usr/bin/python3 scripts/test_summary.py $(WS)/build/test_results
 
-bench: bench-env
+bench: bench-env bench-topo
 
 bench-env: build
 	$(call BIN,$(WS))/bench_env $(BENCH_ARGS)
+
+bench-topo: build
+	$(call BIN,$(WS))/bench_topo $(BENCH_ARGS)
 
 demo: build
 	@mkdir -p results

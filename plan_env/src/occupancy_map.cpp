@@ -152,6 +152,8 @@ void OccupancyMap::readSiteLineX(const Eigen::Vector3i& start, int n, bool unkno
 
 VoxelBox OccupancyMap::setOriginIndex(const Eigen::Vector3i& origin_index) {
   const VoxelBox old_box = geometry_.windowBox();
+  // Keep origin + size far from int overflow; such a window would be kilometres of voxels away.
+  if ((origin_index.array().abs() > kMaxOriginIndex).any()) return VoxelBox();
   if (origin_index == geometry_.originIndex()) return VoxelBox();
   geometry_.setOriginIndex(origin_index);
   const VoxelBox new_box = geometry_.windowBox();
@@ -179,7 +181,8 @@ VoxelBox OccupancyMap::setOriginIndex(const Eigen::Vector3i& origin_index) {
 }
 
 VoxelBox OccupancyMap::recenter(const Eigen::Vector3d& center) {
-  if (!center.allFinite()) return VoxelBox();
+  if (!center.allFinite() || (center.array().abs() * geometry_.inverseResolution() > double(kMaxOriginIndex)).any())
+    return VoxelBox();
   return setOriginIndex(geometry_.indexOf(center) - geometry_.size() / 2);
 }
 

@@ -3,6 +3,7 @@
 
 #include <cstdio>
 #include <fstream>
+#include <limits>
 
 #include "plan_env/map_io.h"
 #include "test_helpers.h"
@@ -124,8 +125,12 @@ TEST_F(BadInput, OutOfMapAndNonFiniteQueries) {
   EXPECT_EQ(map_->state(Eigen::Vector3i(10000, 0, 0)), VoxelState::kOutOfMap);
   EXPECT_FALSE(map_->setState(Eigen::Vector3i(10000, 0, 0), VoxelState::kOccupied));
   EXPECT_TRUE(std::isnan(map_->probability(Eigen::Vector3i(10000, 0, 0))));
-  const VoxelBox none = map_->recenter({NAN, 0, 0});
-  EXPECT_TRUE(none.empty());
+  const Eigen::Vector3i origin = map_->geometry().originIndex();
+  EXPECT_TRUE(map_->recenter({NAN, 0, 0}).empty());
+  EXPECT_TRUE(map_->recenter({1e12, 0, 0}).empty());  // finite but beyond any int index
+  EXPECT_TRUE(map_->recenter({0, -1e300, 0}).empty());
+  EXPECT_TRUE(map_->setOriginIndex(Eigen::Vector3i(std::numeric_limits<int>::max() - 5, 0, 0)).empty());
+  EXPECT_EQ(map_->geometry().originIndex(), origin);
   expectUnchanged();
 }
 

@@ -93,10 +93,14 @@ class OccupancyMap {
   /// Forgets everything: all voxels unknown.
   void clear();
 
+  /// Largest |origin index| a window may move to (indices stay far from int overflow).
+  static constexpr int kMaxOriginIndex = 1 << 28;
   /// Moves the window so that its lowest voxel is origin_index; voxels that leave are forgotten and
-  /// the ones that enter are unknown. Returns the changed box (the whole window if it moved).
+  /// the ones that enter are unknown. Returns the changed box (the whole window if it moved; empty,
+  /// with the map unchanged, if it did not move or origin_index exceeds kMaxOriginIndex).
   VoxelBox setOriginIndex(const Eigen::Vector3i& origin_index);
-  /// Moves the window so that `center` is at its middle (x, y and z).
+  /// Moves the window so that `center` is at its middle (x, y and z); refused (empty box, map
+  /// unchanged) for NaN/inf or out-of-range centres.
   VoxelBox recenter(const Eigen::Vector3d& center);
 
   /// Calls fn(global_index) for every occupied voxel in the window.

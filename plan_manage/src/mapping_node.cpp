@@ -1,0 +1,22 @@
+// Occupancy + ESDF mapping node: topics and parameters are documented in plan_manage/mapping_server.h.
+#include <ros/ros.h>
+
+#include "plan_manage/mapping_server.h"
+
+int main(int argc, char** argv) {
+  ros::init(argc, argv, "mapping_node");
+  ros::NodeHandle nh("~");
+  topo_planner::MappingServer::Config config;
+  if (!topo_planner::readMappingParams(nh, &config)) return 1;
+  std::string error;
+  const auto server = topo_planner::MappingServer::create(nh, config, &error);
+  if (!server) {
+    ROS_ERROR("mapping: cannot start: %s", error.c_str());
+    return 1;
+  }
+  // Two threads: fusion and publishing overlap (MappingServer's locking rule makes that safe).
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  ros::waitForShutdown();
+  return 0;
+}
