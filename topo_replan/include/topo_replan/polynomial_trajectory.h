@@ -1,0 +1,84 @@
+#pragma once
+// Minimum-snap piecewise polynomials through waypoints (Richter, Bry and Roy, "Polynomial
+// trajectory planning for aggressive quadrotor flight in dense indoor environments", ISRR 2013):
+// the global reference trajectory of the replanner, the one the paper's benchmarks start every
+// method from.
+//
+// Each segment is a degree-7 polynomial in normalised time tau = t / T. The cost is the integral of
+// squared snap; written in terms of the derivatives (position to jerk) at the waypoints it is a
+// quadratic form, and the free derivatives (velocity, acceleration and jerk at inner waypoints) have
+// the closed-form optimum of the unconstrained QP. Positions at all waypoints and the derivatives
+// at the two ends are fixed (rest to rest, or a given moving start/end state).
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+namespace topo_planner {
+
+/// Position and its first three derivatives at an instant.
+struct FlatState {
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();
+  Eigen::Vector3d velocity = Eigen::Vector3d::Zero();
+  Eigen::Vector3d acceleration = Eigen::Vector3d::Zero();
+  Eigen::Vector3d jerk = Eigen::Vector3d::Zero();
+};
+
+enum class TrajectoryStatus {
+  kSuccess,
+  kInvalidInput,   ///< fewer than 2 waypoints, NaN/inf values, non-positive durations or limits
+  kInfeasible,     ///< the limits could not be met within the time-scaling budget
+};
+const char* toString(TrajectoryStatus status);
+
+class PolynomialTrajectory {
+ public:
+  static constexpr int kCoefficients = 8;  ///< degree 7
+  struct Segment {
+    double duration = 0.0;
+    /// p(tau) = sum_k coefficients.row(k) * tau^k, tau = t / duration in [0, 1].
+    Eigen::Matrix<double, kCoefficients, 3> coefficients = Eigen::Matrix<double, kCoefficients, 3>::Zero();
+  };
+
+  PolynomialTrajectory() = default;
+  explicit PolynomialTrajectory(std::vector<Segment> segments) : segments_(std::move(segments)) {}
+
+  double duration() const;
+  bool empty() const { return segments_.empty(); }
+  const std::vector<Segment>& segments() const { return segments_; }
+
+  /// The order-th time derivative at t (clamped to [0, duration()]), order 0 to 4.
+  Eigen::Vector3d derivative(double t, int order) const;
+  Eigen::Vector3d position(double t) const { return derivative(t, 0); }
+  Eigen::Vector3d velocity(double t) const { return derivative(t, 1); }
+  Eigen::Vector3d acceleration(double t) const { return derivative(t, 2); }
+  FlatState state(double t) const;
+
+  /// Largest speed and acceleration norm, sampled every dt_s.
+  double maxSpeed(double dt_s = 0.01) const;
+  double maxAcceleration(double dt_s = 0.01) const;
+  /// Integral of squared snap (the cost minimised) [m^2/s^7].
+  double snapCost() const;
+
+ private:
+  std::vector<Segment> segments_;
+};
+
+/// Minimum-snap trajectory through waypoints with the given segment durations [s]; start and end
+/// states give the end derivatives (their positions must equal the first and last waypoint).
+TrajectoryStatus minimumSnapTrajectory(const std::vector<Eigen::Vector3d>& waypoints,
+                                       const std::vector<double>& durations, const FlatState& start,
+                                       const FlatState& end, PolynomialTrajectory* out);
+
+struct ReferenceConfig {
+  double max_vel_mps = 3.0;    ///< speed limit [m/s]
+  double max_acc_mps2 = 2.5;   ///< acceleration limit [m/s^2]
+  int max_rescales = 30;       ///< budget of time stretches to meet the limits
+};
+
+/// Minimum-snap trajectory through waypoints, segment times from a trapezoidal speed profile per
+/// segment, then all times stretched until the speed and acceleration limits hold (sampled).
+TrajectoryStatus referenceTrajectory(const std::vector<Eigen::Vector3d>& waypoints, const FlatState& start,
+                                     const FlatState& end, const ReferenceConfig& config, PolynomialTrajectory* out);
+
+}  // namespace topo_planner

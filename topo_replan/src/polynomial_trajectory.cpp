@@ -1,0 +1,208 @@
+#include "topo_replan/polynomial_trajectory.h"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+
+namespace topo_planner {
+
+namespace {
+
+constexpr int kN = PolynomialTrajectory::kCoefficients;
+constexpr int kFixedOrders = 4;  // position, velocity, acceleration, jerk at each waypoint
+using Mat8 = Eigen::Matrix<double, kN, kN>;
+
+// d^r/dtau^r of tau^k, divided by tau^(k - r): k! / (k - r)!.
+double falling(int k, int r) {
+  double f = 1.0;
+  for (int i = 0; i < r; ++i) f *= double(k - i);
+  return f;
+}
+
+// Maps coefficients to the derivatives (orders 0-3, in tau) at tau = 0 and tau = 1.
+const Mat8& endpointMap() {
+  static const Mat8 a = [] {
+    Mat8 m = Mat8::Zero();
+    for (int r = 0; r < kFixedOrders; ++r) {
+      m(r, r) = falling(r, r);                                           // at tau = 0 only tau^r survives
+      for (int k = r; k < kN; ++k) m(kFixedOrders + r, k) = falling(k, r);  // at tau = 1
+    }
+    return m;
+  }();
+  return a;
+}
+
+// Snap cost in tau: integral over [0, 1] of (d^4 p / dtau^4)^2 = a^T Q a.
+const Mat8& snapCostMatrix() {
+  static const Mat8 q = [] {
+    Mat8 m = Mat8::Zero();
+    for (int j = 4; j < kN; ++j)
+      for (int k = 4; k < kN; ++k) m(j, k) = falling(j, 4) * falling(k, 4) / double(j + k - 7);
+    return m;
+  }();
+  return q;
+}
+
+// Cost of one segment in terms of its endpoint derivatives in real time, d = S A a with
+// S = diag(T^-r): J = T^-7 d^T S^-1 A^-T Q A^-1 S^-1 d.
+Mat8 segmentCost(double T) {
+  static const Mat8 core = [] {
+    const Mat8 a_inv = endpointMap().inverse();
+    return Mat8(a_inv.transpose() * snapCostMatrix() * a_inv);
+  }();
+  Eigen::Matrix<double, kN, 1> s_inv;
+  for (int r = 0; r < kFixedOrders; ++r) s_inv(r) = s_inv(kFixedOrders + r) = std::pow(T, r);
+  return std::pow(T, -7.0) * s_inv.asDiagonal() * core * s_inv.asDiagonal();
+}
+
+bool finiteState(const FlatState& s) {
+  return s.position.allFinite() && s.velocity.allFinite() && s.acceleration.allFinite() && s.jerk.allFinite();
+}
+
+}  // namespace
+
+const char* toString(TrajectoryStatus status) {
+  switch (status) {
+    case TrajectoryStatus::kSuccess: return "success";
+    case TrajectoryStatus::kInvalidInput: return "invalid input";
+    case TrajectoryStatus::kInfeasible: return "limits not met";
+  }
+  return "unknown status";
+}
+
+double PolynomialTrajectory::duration() const {
+  double d = 0.0;
+  for (const Segment& s : segments_) d += s.duration;
+  return d;
+}
+
+Eigen::Vector3d PolynomialTrajectory::derivative(double t, int order) const {
+  if (segments_.empty() || order < 0 || order >= kN) return Eigen::Vector3d::Zero();
+  t = std::clamp(t, 0.0, duration());
+  size_t i = 0;
+  while (i + 1 < segments_.size() && t > segments_[i].duration) {
+    t -= segments_[i].duration;
+    ++i;
+  }
+  const Segment& s = segments_[i];
+  const double tau = std::clamp(t / s.duration, 0.0, 1.0);
+  Eigen::Vector3d v = Eigen::Vector3d::Zero();
+  for (int k = kN - 1; k >= order; --k) v = v * tau + s.coefficients.row(k).transpose() * falling(k, order);
+  return v / std::pow(s.duration, order);
+}
+
+FlatState PolynomialTrajectory::state(double t) const {
+  FlatState s;
+  s.position = derivative(t, 0);
+  s.velocity = derivative(t, 1);
+  s.acceleration = derivative(t, 2);
+  s.jerk = derivative(t, 3);
+  return s;
+}
+
+double PolynomialTrajectory::maxSpeed(double dt_s) const {
+  double m = 0.0;
+  for (double t = 0.0; t <= duration() + 1e-12; t += dt_s) m = std::max(m, velocity(t).norm());
+  return std::max(m, velocity(duration()).norm());
+}
+
+double PolynomialTrajectory::maxAcceleration(double dt_s) const {
+  double m = 0.0;
+  for (double t = 0.0; t <= duration() + 1e-12; t += dt_s) m = std::max(m, acceleration(t).norm());
+  return std::max(m, acceleration(duration()).norm());
+}
+
+double PolynomialTrajectory::snapCost() const {
+  double j = 0.0;
+  for (const Segment& s : segments_) {
+    const Mat8& q = snapCostMatrix();
+    for (int axis = 0; axis < 3; ++axis)
+      j += s.coefficients.col(axis).dot(q * s.coefficients.col(axis)) / std::pow(s.duration, 7.0);
+  }
+  return j;
+}
+
+TrajectoryStatus minimumSnapTrajectory(const std::vector<Eigen::Vector3d>& waypoints,
+                                       const std::vector<double>& durations, const FlatState& start,
+                                       const FlatState& end, PolynomialTrajectory* out) {
+  const int m = int(waypoints.size()) - 1;  // segments
+  if (m < 1 || int(durations.size()) != m || !finiteState(start) || !finiteState(end)) return TrajectoryStatus::kInvalidInput;
+  for (const auto& w : waypoints)
+    if (!w.allFinite()) return TrajectoryStatus::kInvalidInput;
+  for (double d : durations)
+    if (!(std::isfinite(d) && d > 0.0)) return TrajectoryStatus::kInvalidInput;
+
+  // Unknowns: 4 derivatives per waypoint, ordered waypoint-major. Fixed: every position and the
+  // end derivatives; free: velocity, acceleration and jerk at the inner waypoints.
+  const int n = kFixedOrders * (m + 1);
+  Eigen::MatrixXd h = Eigen::MatrixXd::Zero(n, n);
+  for (int i = 0; i < m; ++i) h.block(kFixedOrders * i, kFixedOrders * i, kN, kN) += segmentCost(durations[size_t(i)]);
+  std::vector<int> fixed, free;
+  for (int w = 0; w <= m; ++w)
+    for (int r = 0; r < kFixedOrders; ++r) (r == 0 || w == 0 || w == m ? fixed : free).push_back(kFixedOrders * w + r);
+  Eigen::MatrixXd d(n, 3);
+  for (int w = 0; w <= m; ++w) d.row(kFixedOrders * w) = waypoints[size_t(w)].transpose();
+  const FlatState* ends[2] = {&start, &end};
+  for (int e = 0; e < 2; ++e) {
+    const int base = e == 0 ? 0 : kFixedOrders * m;
+    d.row(base + 1) = ends[e]->velocity.transpose();
+    d.row(base + 2) = ends[e]->acceleration.transpose();
+    d.row(base + 3) = ends[e]->jerk.transpose();
+  }
+  if (!free.empty()) {
+    const int nf = int(fixed.size()), np = int(free.size());
+    Eigen::MatrixXd hpp(np, np), hpf(np, nf), df(nf, 3);
+    for (int a = 0; a < np; ++a) {
+      for (int b = 0; b < np; ++b) hpp(a, b) = h(free[size_t(a)], free[size_t(b)]);
+      for (int b = 0; b < nf; ++b) hpf(a, b) = h(free[size_t(a)], fixed[size_t(b)]);
+    }
+    for (int b = 0; b < nf; ++b) df.row(b) = d.row(fixed[size_t(b)]);
+    const Eigen::MatrixXd dp = hpp.ldlt().solve(-hpf * df);
+    if (!dp.allFinite()) return TrajectoryStatus::kInvalidInput;
+    for (int a = 0; a < np; ++a) d.row(free[size_t(a)]) = dp.row(a);
+  }
+
+  const Mat8 a_inv = endpointMap().inverse();
+  std::vector<PolynomialTrajectory::Segment> segments(static_cast<size_t>(m));
+  for (int i = 0; i < m; ++i) {
+    const double T = durations[size_t(i)];
+    Eigen::Matrix<double, kN, 3> ends_tau = d.block(kFixedOrders * i, 0, kN, 3);  // real time -> tau: * T^r
+    for (int r = 0; r < kFixedOrders; ++r) {
+      ends_tau.row(r) *= std::pow(T, r);
+      ends_tau.row(kFixedOrders + r) *= std::pow(T, r);
+    }
+    segments[size_t(i)].duration = T;
+    segments[size_t(i)].coefficients = a_inv * ends_tau;
+  }
+  *out = PolynomialTrajectory(std::move(segments));
+  return TrajectoryStatus::kSuccess;
+}
+
+TrajectoryStatus referenceTrajectory(const std::vector<Eigen::Vector3d>& waypoints, const FlatState& start,
+                                     const FlatState& end, const ReferenceConfig& config, PolynomialTrajectory* out) {
+  if (waypoints.size() < 2 || !(config.max_vel_mps > 0.0) || !(config.max_acc_mps2 > 0.0) ||
+      !std::isfinite(config.max_vel_mps) || !std::isfinite(config.max_acc_mps2))
+    return TrajectoryStatus::kInvalidInput;
+  // Trapezoidal (rest-to-rest) time per segment at the limits.
+  const double v = config.max_vel_mps, a = config.max_acc_mps2;
+  std::vector<double> durations;
+  for (size_t i = 1; i < waypoints.size(); ++i) {
+    const double dist = (waypoints[i] - waypoints[i - 1]).norm();
+    if (!std::isfinite(dist)) return TrajectoryStatus::kInvalidInput;
+    const double t = dist > v * v / a ? dist / v + v / a : 2.0 * std::sqrt(dist / a);
+    durations.push_back(std::max(t, 0.1));
+  }
+  for (int k = 0; k <= config.max_rescales; ++k) {
+    const TrajectoryStatus s = minimumSnapTrajectory(waypoints, durations, start, end, out);
+    if (s != TrajectoryStatus::kSuccess) return s;
+    const double vr = out->maxSpeed() / v, ar = out->maxAcceleration() / a;
+    if (vr <= 1.0 + 1e-6 && ar <= 1.0 + 1e-6) return TrajectoryStatus::kSuccess;
+    // Stretching time by f divides speeds by f and accelerations by f^2 (exactly so when the end
+    // derivatives are zero; otherwise the loop iterates).
+    const double f = std::max({vr, std::sqrt(ar), 1.02});
+    for (double& d : durations) d *= std::min(f, 2.0) * 1.01;
+  }
+  return TrajectoryStatus::kInfeasible;
+}
+
+}  // namespace topo_planner
