@@ -6,7 +6,7 @@ WS := $(ROOT)/build/ws
 CATKIN_ARGS := -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=Release
 BIN = $(1)/devel/lib/topo_planner
 
-.PHONY: deps build test bench bench-env bench-topo demo test-asan test-tsan clean
+.PHONY: deps build test bench bench-env bench-topo bench-opt demo test-asan test-tsan clean
 
 deps:
 	@bash scripts/install_deps.sh
@@ -30,7 +30,7 @@ test: build
 	cd $(WS) && catkin_make -j$(JOBS) $(CATKIN_ARGS) run_tests
 	@/usr/bin/python3 scripts/test_summary.py $(WS)/build/test_results
 
-bench: bench-env bench-topo
+bench: bench-env bench-topo bench-opt
 
 bench-env: build
 	$(call BIN,$(WS))/bench_env $(BENCH_ARGS)
@@ -38,20 +38,28 @@ bench-env: build
 bench-topo: build
 	$(call BIN,$(WS))/bench_topo $(BENCH_ARGS)
 
+bench-opt: build
+	$(call BIN,$(WS))/bench_opt $(BENCH_ARGS)
+
 demo: build
 	@mkdir -p results
 	$(call BIN,$(WS))/map_demo --map $(ROOT)/test/data/forest0.bt --out $(ROOT)/results
 
 # The tests under AddressSanitizer + UBSan, and under ThreadSanitizer, in their own workspaces.
+# Any sanitizer report stops the test that hit it, so it counts as a failure.
 test-asan: deps
 	$(call make_ws,$(ROOT)/build/ws_asan)
-	cd build/ws_asan && catkin_make -j$(JOBS) -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	@rm -rf build/ws_asan/build/test_results
+	cd build/ws_asan && UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 ASAN_OPTIONS=detect_leaks=1 \
+	  catkin_make -j$(JOBS) -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
 	  -DTOPO_PLANNER_SANITIZE=address,undefined run_tests
-	@UBSAN_OPTIONS=halt_on_error=1 /usr/bin/python3 scripts/test_summary.py $(ROOT)/build/ws_asan/build/test_results
+	@/usr/bin/python3 scripts/test_summary.py $(ROOT)/build/ws_asan/build/test_results
 
 test-tsan: deps
 	$(call make_ws,$(ROOT)/build/ws_tsan)
-	cd build/ws_tsan && catkin_make -j$(JOBS) -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	@rm -rf build/ws_tsan/build/test_results
+	cd build/ws_tsan && TSAN_OPTIONS=halt_on_error=1 \
+	  catkin_make -j$(JOBS) -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
 	  -DTOPO_PLANNER_SANITIZE=thread run_tests
 	@/usr/bin/python3 scripts/test_summary.py $(ROOT)/build/ws_tsan/build/test_results
 

@@ -9,20 +9,35 @@
 #include "path_searching/topo_path_search.h"
 #include "scenes.h"
 
-// Live heap bytes of this test binary, for the memory test.
+// Live heap bytes of this test binary, for the memory test: every replaceable form of global new
+// and delete goes through these two (under AddressSanitizer too).
 static std::atomic<long long> g_live_bytes{0};
-void* operator new(size_t n) {
+static void* countedAlloc(size_t n) noexcept {
   void* p = std::malloc(n ? n : 1);
-  if (!p) throw std::bad_alloc();
-  g_live_bytes += (long long)malloc_usable_size(p);
+  if (p) g_live_bytes += (long long)malloc_usable_size(p);
   return p;
 }
-void operator delete(void* p) noexcept {
+static void countedFree(void* p) noexcept {
   if (!p) return;
   g_live_bytes -= (long long)malloc_usable_size(p);
   std::free(p);
 }
-void operator delete(void* p, size_t) noexcept { operator delete(p); }
+void* operator new(size_t n) {
+  if (void* p = countedAlloc(n)) return p;
+  throw std::bad_alloc();
+}
+void* operator new[](size_t n) {
+  if (void* p = countedAlloc(n)) return p;
+  throw std::bad_alloc();
+}
+void* operator new(size_t n, const std::nothrow_t&) noexcept { return countedAlloc(n); }
+void* operator new[](size_t n, const std::nothrow_t&) noexcept { return countedAlloc(n); }
+void operator delete(void* p) noexcept { countedFree(p); }
+void operator delete[](void* p) noexcept { countedFree(p); }
+void operator delete(void* p, size_t) noexcept { countedFree(p); }
+void operator delete[](void* p, size_t) noexcept { countedFree(p); }
+void operator delete(void* p, const std::nothrow_t&) noexcept { countedFree(p); }
+void operator delete[](void* p, const std::nothrow_t&) noexcept { countedFree(p); }
 
 namespace topo_planner {
 namespace {

@@ -169,6 +169,7 @@ void pointsToPointCloud2(const std::vector<Eigen::Vector3d>& points, const std::
   msg->header.frame_id = frame_id;
   msg->header.stamp = stamp;
   setXyzFields(false, points.size(), msg);
+  if (points.empty()) return;  // the iterators index data[0]: undefined on an empty cloud
   sensor_msgs::PointCloud2Iterator<float> x(*msg, "x"), y(*msg, "y"), z(*msg, "z");
   for (const Eigen::Vector3d& p : points) {
     *x = float(p.x());
@@ -184,6 +185,7 @@ void pointsToPointCloud2(const std::vector<Eigen::Vector3d>& points, const std::
   msg->header.stamp = stamp;
   const size_t n = std::min(points.size(), intensities.size());
   setXyzFields(true, n, msg);
+  if (n == 0) return;  // the iterators index data[0]: undefined on an empty cloud
   sensor_msgs::PointCloud2Iterator<float> x(*msg, "x"), y(*msg, "y"), z(*msg, "z"), in(*msg, "intensity");
   for (size_t i = 0; i < n; ++i) {
     *x = float(points[i].x());
