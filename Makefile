@@ -30,13 +30,25 @@ test: build
 	cd $(WS) && catkin_make -j$(JOBS) $(CATKIN_ARGS) run_tests
 	@/usr/bin/python3 scripts/test_summary.py $(WS)/build/test_results
 
-bench: bench-env bench-topo bench-opt
+bench: bench-env bench-topo bench-replan bench-opt
 
 bench-env: build
 	$(call BIN,$(WS))/bench_env $(BENCH_ARGS)
 
 bench-topo: build
 	$(call BIN,$(WS))/bench_topo $(BENCH_ARGS)
+
+# The paper's Table I: table on stdout, results/replan_tasks.csv, results/replan_table1.{md,png}.
+bench-replan: build
+	@mkdir -p results
+	cd $(WS) && catkin_make -j$(JOBS) $(CATKIN_ARGS) bench_replan_suite >/dev/null
+	$(call BIN,$(WS))/bench_replan_suite --out $(ROOT)/results $(BENCH_ARGS)
+	/usr/bin/python3 scripts/plot_replan.py results/replan_tasks.csv results/replan_table1.png
+
+# The 900 forest_gen tasks (../shared/bench/forest_gen by default), every method.
+FOREST_GEN ?= $(ROOT)/../shared/bench/forest_gen
+bench-forest-gen: build
+	@bash scripts/run_forest_gen.sh $(call BIN,$(WS))/bench_replan $(FOREST_GEN) $(ROOT)/results/forest_gen
 
 bench-opt: build
 	$(call BIN,$(WS))/bench_opt $(BENCH_ARGS)
@@ -58,7 +70,7 @@ test-asan: deps
 test-tsan: deps
 	$(call make_ws,$(ROOT)/build/ws_tsan)
 	@rm -rf build/ws_tsan/build/test_results
-	cd build/ws_tsan && TSAN_OPTIONS=halt_on_error=1 \
+	cd build/ws_tsan && TSAN_OPTIONS="halt_on_error=1 suppressions=$(ROOT)/scripts/tsan.supp" \
 	  catkin_make -j$(JOBS) -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
 	  -DTOPO_PLANNER_SANITIZE=thread run_tests
 	@/usr/bin/python3 scripts/test_summary.py $(ROOT)/build/ws_tsan/build/test_results

@@ -56,13 +56,24 @@ PrmResult plainPrm(const EsdfMap& map, const Task& task, int n, double clearance
         adj[a].push_back(int(b));
         adj[b].push_back(int(a));
       }
-  // Depth-first search for up to 300 paths of at most 20 nodes.
+  // Depth-first search for up to 300 paths of at most 20 nodes, pruned and budgeted as the
+  // roadmap's (hop counts to the goal, 20000 expansions).
+  std::vector<int> hops(nodes.size(), -1);
+  std::vector<int> queue{1};
+  hops[1] = 0;
+  for (size_t h = 0; h < queue.size(); ++h)
+    for (int nb : adj[size_t(queue[h])])
+      if (hops[size_t(nb)] < 0) {
+        hops[size_t(nb)] = hops[size_t(queue[h])] + 1;
+        queue.push_back(nb);
+      }
   std::vector<Path> raw;
   std::vector<int> stack{0};
   std::vector<char> on(nodes.size(), 0);
   on[0] = 1;
+  int expansions = 0;
   std::function<void()> dfs = [&] {
-    if (raw.size() >= 300) return;
+    if (raw.size() >= 300 || ++expansions > 20000 || hops[0] < 0) return;
     const int cur = stack.back();
     for (int nb : adj[size_t(cur)])
       if (nb == 1) {
@@ -74,7 +85,7 @@ PrmResult plainPrm(const EsdfMap& map, const Task& task, int n, double clearance
       }
     if (stack.size() >= 20) return;
     for (int nb : adj[size_t(cur)]) {
-      if (nb == 1 || on[size_t(nb)]) continue;
+      if (nb == 1 || on[size_t(nb)] || hops[size_t(nb)] < 0 || int(stack.size()) + 1 + hops[size_t(nb)] > 20) continue;
       on[size_t(nb)] = 1;
       stack.push_back(nb);
       dfs();
@@ -100,7 +111,7 @@ PrmResult plainPrm(const EsdfMap& map, const Task& task, int n, double clearance
 }  // namespace
 
 int main(int argc, char** argv) {
-  int maps = 10, tasks_per_map = 50, samples = 200, prm_tasks = 100, unproductive = 0;
+  int maps = 10, tasks_per_map = 50, samples = 160, prm_tasks = 100, unproductive = 0;
   for (int i = 1; i + 1 < argc; i += 2) {
     if (!std::strcmp(argv[i], "--maps")) maps = std::max(1, std::atoi(argv[i + 1]));
     if (!std::strcmp(argv[i], "--tasks-per-map")) tasks_per_map = std::max(1, std::atoi(argv[i + 1]));

@@ -23,9 +23,11 @@ bool TopoPathSearch::Config::validate(std::string* why) const {
   if (!(roadmap.sample_inflation_m.allFinite() && (roadmap.sample_inflation_m.array() >= 0.0).all()))
     err << "sample_inflation_m must be >= 0; ";
   if (roadmap.max_samples < 1) err << "max_samples must be >= 1; ";
+  if (roadmap.max_extra_samples < 0) err << "max_extra_samples must be >= 0; ";
   if (!(roadmap.max_time_s >= 0.0)) err << "max_time_s must be >= 0; ";
   if (roadmap.max_raw_paths < 1) err << "max_raw_paths must be >= 1; ";
   if (roadmap.max_path_nodes < 3) err << "max_path_nodes must be >= 3; ";
+  if (roadmap.max_search_expansions < 1) err << "max_search_expansions must be >= 1; ";
   const std::string s = err.str();
   if (why) *why = s.empty() ? "" : s.substr(0, s.size() - 2);
   return s.empty();
@@ -67,8 +69,19 @@ TopoSearchResult TopoPathSearch::search(const EsdfMap& map, const Eigen::Vector3
   stats.roadmap_ms = msSince(t);
   t = std::chrono::steady_clock::now();
   std::vector<Path> raw = roadmap_.extractPaths();
-  stats.raw_paths = int(raw.size());
+  // Unconnected after N_max samples: keep sampling, a chunk at a time, within the extra budget.
   stats.extraction_ms = msSince(t);
+  for (int extra = 0; raw.empty() && extra < config_.roadmap.max_extra_samples && !stats.roadmap.timed_out;
+       extra += config_.roadmap.max_samples) {
+    t = std::chrono::steady_clock::now();
+    roadmap_.extend(std::min(config_.roadmap.max_samples, config_.roadmap.max_extra_samples - extra), checker, &rng,
+                    &stats.roadmap);
+    stats.roadmap_ms += msSince(t);
+    t = std::chrono::steady_clock::now();
+    raw = roadmap_.extractPaths();
+    stats.extraction_ms += msSince(t);
+  }
+  stats.raw_paths = int(raw.size());
 
   // Alg. 2 on the shortest raw paths.
   t = std::chrono::steady_clock::now();

@@ -28,33 +28,36 @@ TopologicalRoadmap::Stats TopologicalRoadmap::build(const Eigen::Vector3d& start
   Eigen::Vector3d side = Eigen::Vector3d::UnitZ().cross(axis);
   if (side.norm() < 1e-3) side = Eigen::Vector3d::UnitX().cross(axis);
   side.normalize();
-  Eigen::Matrix3d rotation;
-  rotation << axis, side, axis.cross(side);
-  const Eigen::Vector3d centre = 0.5 * (start + goal);
-  const Eigen::Vector3d half(0.5 * (goal - start).norm() + config_.sample_inflation_m.x(),
-                             config_.sample_inflation_m.y(), config_.sample_inflation_m.z());
-  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  rotation_ << axis, side, axis.cross(side);
+  centre_ = 0.5 * (start + goal);
+  half_ = Eigen::Vector3d(0.5 * (goal - start).norm() + config_.sample_inflation_m.x(), config_.sample_inflation_m.y(),
+                          config_.sample_inflation_m.z());
+  started_ = std::chrono::steady_clock::now();
+  extend(config_.max_samples, checker, rng, &stats);
+  return stats;
+}
 
-  const auto t0 = std::chrono::steady_clock::now();
+void TopologicalRoadmap::extend(int samples, const VisibilityChecker& checker, std::mt19937* rng, Stats* stats) {
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
   int unproductive = 0;
-  for (int n = 0; n < config_.max_samples; ++n) {
+  for (int n = 0; n < samples; ++n) {
+    if (config_.max_time_s > 0.0 && (n & 7) == 0 &&
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count() > config_.max_time_s) {
+      stats->timed_out = true;
+      break;
+    }
     if (config_.max_unproductive_samples > 0 && unproductive >= config_.max_unproductive_samples) {
-      stats.covered = true;
+      stats->covered = true;
       break;
     }
     const size_t size_before = nodes_.size();
-    const int replaced_before = stats.replaced;
+    const int replaced_before = stats->replaced;
     ++unproductive;
-    if (config_.max_time_s > 0.0 && (n & 7) == 0 &&
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() > config_.max_time_s) {
-      stats.timed_out = true;
-      break;
-    }
-    ++stats.samples;
+    ++stats->samples;
     const Eigen::Vector3d u(unit(*rng), unit(*rng), unit(*rng));
-    const Eigen::Vector3d p = centre + rotation * half.cwiseProduct(u);
+    const Eigen::Vector3d p = centre_ + rotation_ * half_.cwiseProduct(u);
     if (!checker.isFree(p)) {
-      ++stats.rejected;
+      ++stats->rejected;
       continue;
     }
     int visible[2];
@@ -84,7 +87,7 @@ TopologicalRoadmap::Stats TopologicalRoadmap::build(const Eigen::Vector3d& start
       distinct = false;
       if (pathLength(candidate) < pathLength(existing)) {
         nodes_[size_t(c)].position = p;  // Replace
-        ++stats.replaced;
+        ++stats->replaced;
       }
       break;
     }
@@ -93,40 +96,55 @@ TopologicalRoadmap::Stats TopologicalRoadmap::build(const Eigen::Vector3d& start
       connect(c, visible[0]);
       connect(c, visible[1]);
     }
-    if (nodes_.size() != size_before || stats.replaced != replaced_before) unproductive = 0;
+    if (nodes_.size() != size_before || stats->replaced != replaced_before) unproductive = 0;
   }
-  for (const Node& node : nodes_) (node.type == NodeType::kGuard ? stats.guards : stats.connectors)++;
-  return stats;
+  stats->guards = stats->connectors = 0;
+  for (const Node& node : nodes_) (node.type == NodeType::kGuard ? stats->guards : stats->connectors)++;
 }
 
 std::vector<Path> TopologicalRoadmap::extractPaths() const {
   std::vector<Path> out;
-  std::vector<int> stack{kStart};
-  std::vector<char> on_stack(nodes_.size(), 0);
-  on_stack[kStart] = 1;
-  depthFirst(&stack, &on_stack, &out);
+  SearchState s;
+  // Hop counts to the goal, breadth first.
+  s.hops_to_goal.assign(nodes_.size(), -1);
+  std::vector<int> queue{kGoal};
+  s.hops_to_goal[kGoal] = 0;
+  for (size_t head = 0; head < queue.size(); ++head)
+    for (int nb : nodes_[size_t(queue[head])].neighbors)
+      if (s.hops_to_goal[size_t(nb)] < 0) {
+        s.hops_to_goal[size_t(nb)] = s.hops_to_goal[size_t(queue[head])] + 1;
+        queue.push_back(nb);
+      }
+  if (s.hops_to_goal[kStart] < 0) return out;  // not connected
+  s.stack = {kStart};
+  s.on_stack.assign(nodes_.size(), 0);
+  s.on_stack[kStart] = 1;
+  depthFirst(&s, &out);
   return out;
 }
 
-void TopologicalRoadmap::depthFirst(std::vector<int>* stack, std::vector<char>* on_stack, std::vector<Path>* out) const {
-  const Node& cur = nodes_[size_t(stack->back())];
+void TopologicalRoadmap::depthFirst(SearchState* s, std::vector<Path>* out) const {
+  if (++s->expansions > config_.max_search_expansions) return;
+  const Node& cur = nodes_[size_t(s->stack.back())];
   for (int nb : cur.neighbors) {
     if (nb != kGoal) continue;
     Path p;
-    for (int i : *stack) p.push_back(nodes_[size_t(i)].position);
+    for (int i : s->stack) p.push_back(nodes_[size_t(i)].position);
     p.push_back(nodes_[kGoal].position);
     out->push_back(std::move(p));
     if (int(out->size()) >= config_.max_raw_paths) return;
   }
-  if (int(stack->size()) >= config_.max_path_nodes) return;
   for (int nb : cur.neighbors) {
-    if (nb == kGoal || (*on_stack)[size_t(nb)]) continue;
-    stack->push_back(nb);
-    (*on_stack)[size_t(nb)] = 1;
-    depthFirst(stack, on_stack, out);
-    (*on_stack)[size_t(nb)] = 0;
-    stack->pop_back();
-    if (int(out->size()) >= config_.max_raw_paths) return;
+    if (nb == kGoal || s->on_stack[size_t(nb)]) continue;
+    // The path would have stack + hops_to_goal(nb) + 1 nodes at least.
+    const int hops = s->hops_to_goal[size_t(nb)];
+    if (hops < 0 || int(s->stack.size()) + 1 + hops > config_.max_path_nodes) continue;
+    s->stack.push_back(nb);
+    s->on_stack[size_t(nb)] = 1;
+    depthFirst(s, out);
+    s->on_stack[size_t(nb)] = 0;
+    s->stack.pop_back();
+    if (int(out->size()) >= config_.max_raw_paths || s->expansions > config_.max_search_expansions) return;
   }
 }
 

@@ -218,9 +218,12 @@ TEST(TopoSearch, BadInputsGetTheirStatus) {
   TopoPathSearch::Config bad = searchConfig();
   bad.max_paths = 0;
   EXPECT_EQ(TopoPathSearch(bad).search(map, {1, 4, 1.5}, {9, 4, 1.5}).status, SearchStatus::kInvalidInput);
-  // One sample cannot connect around the pillar.
-  EXPECT_EQ(TopoPathSearch(searchConfig(1)).search(map, {1, 4, 1.5}, {9, 4, 1.5}).status,
-            SearchStatus::kBudgetExhausted);
+  // One sample, no extra budget, cannot connect around the pillar; with the extra budget it does.
+  TopoPathSearch::Config one = searchConfig(1);
+  one.roadmap.max_extra_samples = 0;
+  EXPECT_EQ(TopoPathSearch(one).search(map, {1, 4, 1.5}, {9, 4, 1.5}).status, SearchStatus::kBudgetExhausted);
+  one.roadmap.max_extra_samples = 600;
+  EXPECT_EQ(TopoPathSearch(one).search(map, {1, 4, 1.5}, {9, 4, 1.5}).status, SearchStatus::kSuccess);
 }
 
 TEST(TopoSearch, SameSeedSameResult) {

@@ -52,7 +52,7 @@ class TopoPathSearch {
     double clearance_m = 0.3;       ///< samples and segments keep this distance from obstacles [m]
     bool unknown_is_free = true;    ///< plan through unobserved space (replanning in a partial map)
     int max_paths = 5;              ///< K_max
-    int max_shortened_paths = 20;   ///< only the shortest raw paths are shortened (Alg. 2)
+    int max_shortened_paths = 16;   ///< only the shortest raw paths are shortened (Alg. 2)
     double max_length_ratio = 2.0;  ///< r_max: drop paths longer than this times the shortest
     uint32_t seed = 1;              ///< the generator is re-seeded with it at every search
     bool keep_raw_paths = false;    ///< fill TopoSearchResult::raw_paths and roadmap

@@ -1,0 +1,351 @@
+// PGO and the GTO baseline: the paper's failure case (Fig. 2), enforced feasibility, an independent
+// dense collision oracle on forest tasks, invalid input, determinism and parallel use.
+#include <gtest/gtest.h>
+
+#include <random>
+#include <thread>
+
+#include "bspline_opt/path_guided_optimizer.h"
+#include "path_searching/grid_astar.h"
+#include "path_searching/path_shortener.h"
+#include "test_scenes.h"
+
+namespace topo_planner {
+namespace {
+
+constexpr double kMaxVel = 3.0, kMaxAcc = 2.5, kClearance = 0.25;
+
+PathGuidedOptimizer::Config testConfig() {
+  PathGuidedOptimizer::Config c;
+  c.max_vel_mps = kMaxVel;
+  c.max_acc_mps2 = kMaxAcc;
+  c.clearance_m = kClearance;
+  c.max_iterations = 300;  // budgets by count only
+  c.max_time_s = 0.0;
+  return c;
+}
+
+// The reference segment: a straight rest-to-rest cubic with control points ~0.3 m apart, timed to
+// the limits.
+UniformBspline reference(const Eigen::Vector3d& start, const Eigen::Vector3d& goal) {
+  const int n = std::clamp(int(std::lround((goal - start).norm() / 0.3)) + 5, 20, 40);
+  UniformBspline s = UniformBspline::straightLine(start, goal, n, 3, 0.01);
+  s.reallocateTime(kMaxVel, kMaxAcc);
+  return s;
+}
+
+// Independent oracle: the smallest ESDF distance over 4000 samples evenly spaced in time, and the
+// largest speed and acceleration magnitude over the same samples (from the derivative splines).
+struct Oracle {
+  double min_distance = 1e9, max_speed = 0.0, max_acc = 0.0;
+  bool out_of_map = false;
+};
+Oracle oracle(const UniformBspline& s, const EsdfMap& map) {
+  Oracle o;
+  const UniformBspline v = s.derivative(), a = v.derivative();
+  for (int k = 0; k <= 4000; ++k) {
+    const double t = s.duration() * k / 4000.0;
+    const DistanceQuery q = map.query(s.evaluate(t));
+    if (q.status != QueryStatus::kOk && q.status != QueryStatus::kUnknown) o.out_of_map = true;
+    o.min_distance = std::min(o.min_distance, q.distance);
+    o.max_speed = std::max(o.max_speed, v.evaluate(t).norm());
+    o.max_acc = std::max(o.max_acc, a.evaluate(t).norm());
+  }
+  return o;
+}
+
+void expectSafeAndFeasible(const OptimizationResult& r, const EsdfMap& map) {
+  const Oracle o = oracle(r.spline, map);
+  EXPECT_FALSE(o.out_of_map);
+  EXPECT_GE(o.min_distance, kClearance);
+  EXPECT_LE(o.max_speed, kMaxVel + 1e-9);
+  EXPECT_LE(o.max_acc, kMaxAcc + 1e-9);
+  EXPECT_LE(r.stats.max_vel_mps, kMaxVel + 1e-9);
+  EXPECT_LE(r.stats.max_acc_mps2, kMaxAcc + 1e-9);
+}
+
+bool polylineFree(const Path& p, const EsdfMap& map, double clearance) {
+  for (size_t i = 1; i < p.size(); ++i)
+    for (int k = 0; k <= 200; ++k) {
+      const DistanceQuery q = map.query(p[i - 1] + (p[i] - p[i - 1]) * (k / 200.0));
+      if (q.status != QueryStatus::kOk || q.distance < clearance) return false;
+    }
+  return true;
+}
+
+// The paper's Fig. 2: a straight trajectory through the middle of a wide wall crosses the ESDF
+// ridge inside it. The ESDF gradients on its control points point back and forth along the
+// trajectory, never sideways, so phase 2 alone stays in collision; the guide path pulls it round.
+TEST(PathGuidedOptimizer, WideBoxRidgeDefeatsGtoButNotPgo) {
+  test::Scene scene({12.0, 10.0, 3.0});
+  scene.box({5.0, 2.0, -1.0}, {7.0, 8.0, 4.0});  // 2 m thick, 6 m wide, full height
+  const EsdfMap& map = scene.finish();
+  const Eigen::Vector3d start(1.0, 5.0, 1.5), goal(11.0, 5.0, 1.5);
+  const UniformBspline initial = reference(start, goal);
+  const Path guide{start, {4.2, 1.2, 1.5}, {7.8, 1.2, 1.5}, goal};
+  ASSERT_TRUE(polylineFree(guide, map, 0.4));
+
+  const PathGuidedOptimizer optimizer(testConfig());
+  const OptimizationResult before = optimizer.check(initial, map);
+  EXPECT_EQ(before.status, OptimizationStatus::kInCollision);
+
+  const OptimizationResult gto = optimizer.gto(initial, map);
+  EXPECT_EQ(gto.status, OptimizationStatus::kInCollision) << toString(gto.status);
+  EXPECT_LT(oracle(gto.spline, map).min_distance, 0.0);  // still inside the wall
+  EXPECT_GT(gto.stats.iterations, 0);
+
+  const OptimizationResult pgo = optimizer.optimize(initial, guide, map);
+  EXPECT_EQ(pgo.status, OptimizationStatus::kSuccess) << pgo.message;
+  expectSafeAndFeasible(pgo, map);
+  EXPECT_GT(pgo.cost.guide, 0.0);
+  EXPECT_GT(pgo.cost.jerk_integral_m2ps5, 0.0);
+  EXPECT_NEAR(pgo.cost.duration_s, pgo.spline.duration(), 1e-12);
+  // The ends are the reference's.
+  EXPECT_LT((pgo.spline.evaluate(0.0) - start).norm(), 1e-9);
+  EXPECT_LT((pgo.spline.evaluate(pgo.spline.duration()) - goal).norm(), 1e-9);
+}
+
+// Between two pillars 0.3 m apart the trajectory sits on the ESDF ridge of the gap (a saddle: a
+// maximum across it, a minimum along it): the gradients push along the gap, not out of it.
+TEST(PathGuidedOptimizer, NarrowGapBetweenPillarsDefeatsGtoButNotPgo) {
+  test::Scene scene({10.0, 8.0, 3.0});
+  scene.pillar(5.0, 4.0 + 0.55, 0.4);
+  scene.pillar(5.0, 4.0 - 0.55, 0.4);
+  const EsdfMap& map = scene.finish();
+  const Eigen::Vector3d start(1.0, 4.0, 1.5), goal(9.0, 4.0, 1.5);
+  const UniformBspline initial = reference(start, goal);
+  const Path guide{start, {4.0, 2.3, 1.5}, {6.0, 2.3, 1.5}, goal};
+  ASSERT_TRUE(polylineFree(guide, map, 0.4));
+
+  const PathGuidedOptimizer optimizer(testConfig());
+  const OptimizationResult gto = optimizer.gto(initial, map);
+  EXPECT_EQ(gto.status, OptimizationStatus::kInCollision) << toString(gto.status);
+  const OptimizationResult pgo = optimizer.optimize(initial, guide, map);
+  EXPECT_EQ(pgo.status, OptimizationStatus::kSuccess) << pgo.message;
+  expectSafeAndFeasible(pgo, map);
+}
+
+// Seeded forest tasks: every result reported successful passes the independent dense oracle, and
+// PGO (guide from grid A* + shortening) succeeds at least as often as GTO, and on nearly all tasks.
+TEST(PathGuidedOptimizer, ForestTasksSuccessMeansSafeAndFeasible) {
+  test::Scene scene({20.0, 20.0, 3.0});
+  scene.forest(ObstacleDensity::kMedium, 1001);
+  const EsdfMap& map = scene.finish();
+  GridAStar::Config ac;
+  ac.clearance_m = 0.4;
+  GridAStar astar(ac);
+  const VisibilityChecker checker(map, 0.4, true), roomy(map, 0.6, true), blocked(map, kClearance, true);
+  const PathShortener shortener(checker);
+  const PathGuidedOptimizer optimizer(testConfig());
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> uxy(1.5, 18.5), uz(1.0, 2.0);
+  int tasks = 0, pgo_ok = 0, gto_ok = 0;
+  while (tasks < 12) {
+    const Eigen::Vector3d start(uxy(rng), uxy(rng), uz(rng)), goal(uxy(rng), uxy(rng), uz(rng));
+    const double d = (goal - start).norm();
+    if (d < 5.0 || d > 9.0 || !roomy.isFree(start) || !roomy.isFree(goal) || blocked.lineVisible(start, goal)) continue;
+    const GridAStar::Result a = astar.search(map, start, goal);
+    if (a.status != SearchStatus::kSuccess) continue;
+    ++tasks;
+    const Path guide = shortener.shorten(a.path);
+    const UniformBspline initial = reference(start, goal);
+    const OptimizationResult pgo = optimizer.optimize(initial, guide, map);
+    const OptimizationResult gto = optimizer.gto(initial, map);
+    for (const OptimizationResult* r : {&pgo, &gto}) {
+      if (r->status != OptimizationStatus::kSuccess) continue;
+      SCOPED_TRACE(tasks);
+      expectSafeAndFeasible(*r, map);
+    }
+    pgo_ok += pgo.status == OptimizationStatus::kSuccess;
+    gto_ok += gto.status == OptimizationStatus::kSuccess;
+  }
+  EXPECT_GE(pgo_ok, 11);
+  EXPECT_GE(pgo_ok, gto_ok);
+}
+
+TEST(PathGuidedOptimizer, FeasibilityIsEnforcedByTimeReallocation) {
+  test::Scene scene({12.0, 10.0, 3.0});
+  scene.box({5.0, 2.0, -1.0}, {7.0, 8.0, 4.0});
+  const EsdfMap& map = scene.finish();
+  const Eigen::Vector3d start(1.0, 5.0, 1.5), goal(11.0, 5.0, 1.5);
+  UniformBspline fast = reference(start, goal);
+  fast.setKnotSpan(fast.knotSpan() * 0.25);  // 4 times the speed, 16 times the acceleration
+  const Path guide{start, {4.2, 1.2, 1.5}, {7.8, 1.2, 1.5}, goal};
+
+  PathGuidedOptimizer::Config c = testConfig();
+  c.l2d = 0.0;  // feasibility not even weighted: the reallocation alone must enforce it
+  const OptimizationResult r = PathGuidedOptimizer(c).optimize(fast, guide, map);
+  EXPECT_EQ(r.status, OptimizationStatus::kSuccess) << r.message;
+  EXPECT_GT(r.stats.time_ratio, 1.2);
+  expectSafeAndFeasible(r, map);
+  EXPECT_NEAR(r.cost.feasibility, 0.0, 1e-12);
+
+  c.reallocate_time = false;
+  const OptimizationResult unstretched = PathGuidedOptimizer(c).optimize(fast, guide, map);
+  EXPECT_EQ(unstretched.status, OptimizationStatus::kInfeasible);
+  EXPECT_EQ(unstretched.stats.time_ratio, 1.0);
+  c.reallocate_time = true;
+  c.max_time_ratio = 1.0 + 0.5 * (r.stats.time_ratio - 1.0);  // the stretch needed is longer
+  const OptimizationResult capped = PathGuidedOptimizer(c).optimize(fast, guide, map);
+  EXPECT_EQ(capped.status, OptimizationStatus::kInfeasible);
+  EXPECT_GT(capped.stats.time_ratio, c.max_time_ratio);
+}
+
+TEST(PathGuidedOptimizer, InvalidInputIsAStatusNotACrash) {
+  test::Scene scene({6.0, 6.0, 3.0});
+  const EsdfMap& map = scene.finish();
+  const PathGuidedOptimizer optimizer(testConfig());
+  const UniformBspline good = UniformBspline::straightLine({1, 1, 1}, {5, 5, 1}, 20, 3, 0.3);
+  const Path guide{{1, 1, 1}, {5, 5, 1}};
+  ASSERT_EQ(optimizer.optimize(good, guide, map).status, OptimizationStatus::kSuccess);
+
+  std::vector<std::pair<std::string, UniformBspline>> bad;
+  UniformBspline nan = good;
+  nan.controlPoints()(7, 2) = NAN;
+  bad.emplace_back("NaN control point", nan);
+  UniformBspline inf = good;
+  inf.controlPoints()(9, 0) = INFINITY;
+  bad.emplace_back("inf control point", inf);
+  UniformBspline zero = good;
+  zero.setKnotSpan(0.0);
+  bad.emplace_back("zero knot span", zero);
+  UniformBspline negative = good;
+  negative.setKnotSpan(-0.2);
+  bad.emplace_back("negative knot span", negative);
+  bad.emplace_back("fewer than degree + 1 control points", UniformBspline(good.controlPoints().topRows(3), 3, 0.3));
+  bad.emplace_back("no free control point", UniformBspline(good.controlPoints().topRows(6), 3, 0.3));
+  bad.emplace_back("degree 0", UniformBspline(good.controlPoints(), 0, 0.3));
+  bad.emplace_back("empty spline", UniformBspline());
+  for (const auto& [name, spline] : bad) {
+    SCOPED_TRACE(name);
+    for (const OptimizationResult& r :
+         {optimizer.optimize(spline, guide, map), optimizer.gto(spline, map), optimizer.gtoWithRestarts(spline, map, 3, 1),
+          optimizer.guidePhase(spline, guide), optimizer.refinePhase(spline, map), optimizer.check(spline, map)}) {
+      EXPECT_EQ(r.status, OptimizationStatus::kInvalidInput);
+      EXPECT_FALSE(r.message.empty());
+    }
+  }
+  EXPECT_EQ(optimizer.optimize(good, Path{}, map).status, OptimizationStatus::kInvalidInput);
+  EXPECT_EQ(optimizer.guidePhase(good, Path{}).status, OptimizationStatus::kInvalidInput);
+  EXPECT_EQ(optimizer.optimize(good, Path{{1, NAN, 1}}, map).status, OptimizationStatus::kInvalidInput);
+
+  // A valid spline far too long for a local check (10^4 km): refused, not sampled 10^8 times.
+  const UniformBspline huge = UniformBspline::straightLine({1, 1, 1}, {1e7, 1, 1}, 20, 3, 1.0);
+  EXPECT_EQ(optimizer.check(huge, map).status, OptimizationStatus::kInvalidInput);
+
+  PathGuidedOptimizer::Config c = testConfig();
+  c.algorithm = "LD_NO_SUCH_THING";
+  EXPECT_EQ(PathGuidedOptimizer(c).optimize(good, guide, map).status, OptimizationStatus::kInvalidInput);
+  c = testConfig();
+  c.l1g = 0.0;
+  EXPECT_EQ(PathGuidedOptimizer(c).optimize(good, guide, map).status, OptimizationStatus::kInvalidInput);
+  c = testConfig();
+  c.max_vel_mps = -1.0;
+  EXPECT_EQ(PathGuidedOptimizer(c).gto(good, map).status, OptimizationStatus::kInvalidInput);
+  c = testConfig();
+  c.max_iterations = 0;
+  EXPECT_EQ(PathGuidedOptimizer(c).gto(good, map).status, OptimizationStatus::kInvalidInput);
+}
+
+TEST(PathGuidedOptimizer, NonFiniteCostIsOptimizationFailed) {
+  test::Scene scene({6.0, 6.0, 3.0});
+  const EsdfMap& map = scene.finish();
+  // A valid spline whose velocities overflow: (1 m / 1e-200 s)^2 is infinite.
+  const UniformBspline s = UniformBspline::straightLine({1, 1, 1}, {5, 5, 1}, 20, 3, 1e-200);
+  ASSERT_TRUE(s.isValid());
+  const PathGuidedOptimizer optimizer(testConfig());
+  const OptimizationResult r = optimizer.gto(s, map);
+  EXPECT_EQ(r.status, OptimizationStatus::kOptimizationFailed);
+  EXPECT_NE(r.message.find("not finite"), std::string::npos) << r.message;
+  EXPECT_EQ(optimizer.optimize(s, {{1, 1, 1}, {5, 5, 1}}, map).status, OptimizationStatus::kOptimizationFailed);
+}
+
+TEST(PathGuidedOptimizer, OutOfMapIsReported) {
+  test::Scene scene({6.0, 6.0, 3.0});
+  const EsdfMap& map = scene.finish();
+  const UniformBspline s = UniformBspline::straightLine({1, 1, 1}, {9, 1, 1}, 20, 3, 0.5);  // ends outside
+  EXPECT_EQ(PathGuidedOptimizer(testConfig()).check(s, map).status, OptimizationStatus::kOutOfMap);
+}
+
+TEST(PathGuidedOptimizer, AlgorithmsAndRestartsAreRepeatable) {
+  test::Scene scene({12.0, 10.0, 3.0});
+  scene.box({5.0, 2.0, -1.0}, {7.0, 8.0, 4.0});
+  const EsdfMap& map = scene.finish();
+  const UniformBspline initial = reference({1.0, 5.0, 1.5}, {11.0, 5.0, 1.5});
+  const Path guide{initial.evaluate(0), {4.2, 1.2, 1.5}, {7.8, 1.2, 1.5}, initial.evaluate(initial.duration())};
+  for (const char* algorithm : {"LD_LBFGS", "LD_MMA", "LD_TNEWTON_PRECOND_RESTART"}) {
+    SCOPED_TRACE(algorithm);
+    PathGuidedOptimizer::Config c = testConfig();
+    c.algorithm = algorithm;
+    const PathGuidedOptimizer optimizer(c);
+    const OptimizationResult a = optimizer.optimize(initial, guide, map), b = optimizer.optimize(initial, guide, map);
+    EXPECT_EQ(a.status, OptimizationStatus::kSuccess) << a.message;
+    EXPECT_EQ(a.spline.controlPoints(), b.spline.controlPoints());
+    EXPECT_EQ(a.stats.iterations, b.stats.iterations);
+    EXPECT_LE(a.stats.iterations, c.max_iterations);
+  }
+  const PathGuidedOptimizer optimizer(testConfig());
+  const OptimizationResult r1 = optimizer.gtoWithRestarts(initial, map, 6, 99);
+  const OptimizationResult r2 = optimizer.gtoWithRestarts(initial, map, 6, 99);
+  EXPECT_EQ(r1.stats.runs, 6);
+  EXPECT_EQ(r1.stats.best_run, r2.stats.best_run);
+  EXPECT_EQ(r1.spline.controlPoints(), r2.spline.controlPoints());
+  // Restarts can only help: the best of n is at least as good as the unperturbed run.
+  const OptimizationResult single = optimizer.gto(initial, map);
+  if (single.status == OptimizationStatus::kSuccess) {
+    EXPECT_EQ(r1.status, OptimizationStatus::kSuccess);
+  }
+  if (r1.status == single.status) {
+    EXPECT_LE(r1.cost.phase2, single.cost.phase2);
+  }
+  if (r1.status == OptimizationStatus::kSuccess) expectSafeAndFeasible(r1, map);
+}
+
+// One optimizer per worker (and one shared const optimizer) on a shared const map: the results equal
+// the sequential ones bit for bit (no hidden shared state). Run under ThreadSanitizer too.
+TEST(PathGuidedOptimizer, ParallelWorkersMatchSequential) {
+  test::Scene scene({12.0, 10.0, 3.0});
+  scene.box({5.0, 2.0, -1.0}, {7.0, 8.0, 4.0});
+  scene.pillar(3.0, 7.0, 0.4);
+  const EsdfMap& map = scene.finish();
+  struct Job {
+    UniformBspline initial;
+    Path guide;
+  };
+  std::vector<Job> jobs;
+  for (int k = 0; k < 8; ++k) {
+    const Eigen::Vector3d start(1.0, 4.0 + 0.25 * k, 1.2 + 0.05 * k), goal(11.0, 6.0 - 0.2 * k, 1.5);
+    const double side = k % 2 ? 1.2 : 8.8;
+    jobs.push_back({reference(start, goal), {start, {4.2, side, 1.5}, {7.8, side, 1.5}, goal}});
+  }
+  const PathGuidedOptimizer shared(testConfig());
+  std::vector<OptimizationResult> sequential;
+  for (const Job& j : jobs) sequential.push_back(shared.optimize(j.initial, j.guide, map));
+  std::vector<OptimizationResult> own(jobs.size()), common(jobs.size());
+  std::vector<std::thread> workers;
+  for (int w = 0; w < 4; ++w)
+    workers.emplace_back([&, w] {
+      const PathGuidedOptimizer mine(testConfig());
+      for (size_t k = size_t(w); k < jobs.size(); k += 4) {
+        own[k] = mine.optimize(jobs[k].initial, jobs[k].guide, map);
+        common[k] = shared.optimize(jobs[k].initial, jobs[k].guide, map);
+      }
+    });
+  for (std::thread& t : workers) t.join();
+  for (size_t k = 0; k < jobs.size(); ++k) {
+    EXPECT_EQ(own[k].status, sequential[k].status);
+    EXPECT_EQ(own[k].spline.controlPoints(), sequential[k].spline.controlPoints());
+    EXPECT_EQ(own[k].spline.knotSpan(), sequential[k].spline.knotSpan());
+    EXPECT_EQ(common[k].spline.controlPoints(), sequential[k].spline.controlPoints());
+  }
+}
+
+TEST(OptimizationStatus, ToString) {
+  for (OptimizationStatus s : {OptimizationStatus::kSuccess, OptimizationStatus::kInCollision, OptimizationStatus::kOutOfMap,
+                               OptimizationStatus::kInfeasible, OptimizationStatus::kOptimizationFailed,
+                               OptimizationStatus::kInvalidInput})
+    EXPECT_STRNE(toString(s), "unknown status");
+}
+
+}  // namespace
+}  // namespace topo_planner

@@ -1,0 +1,58 @@
+#pragma once
+// Synthetic maps for the optimiser tests: an all-free map with shapes carved in, or a seeded forest.
+
+#include <cmath>
+#include <memory>
+#include <string>
+
+#include "plan_env/esdf_map.h"
+#include "plan_env/map_generator.h"
+
+namespace topo_planner {
+namespace test {
+
+struct Scene {
+  std::shared_ptr<OccupancyMap> occupancy;
+  std::unique_ptr<EsdfMap> esdf;
+
+  /// An all-free map of the given size (lower corner at the origin).
+  explicit Scene(const Eigen::Vector3d& size_m, double resolution = 0.1) {
+    OccupancyMap::Config c;
+    c.resolution_m = resolution;
+    c.size_m = size_m;
+    c.origin_m = Eigen::Vector3d::Zero();
+    std::string err;
+    occupancy = std::shared_ptr<OccupancyMap>(OccupancyMap::create(c, &err));
+    fill([](const Eigen::Vector3d&) { return true; }, VoxelState::kFree);
+  }
+  template <typename Inside>
+  void fill(Inside&& inside, VoxelState state = VoxelState::kOccupied) {
+    const GridGeometry& g = occupancy->geometry();
+    const VoxelBox w = g.windowBox();
+    Eigen::Vector3i i;
+    for (i.z() = w.min.z(); i.z() <= w.max.z(); ++i.z())
+      for (i.y() = w.min.y(); i.y() <= w.max.y(); ++i.y())
+        for (i.x() = w.min.x(); i.x() <= w.max.x(); ++i.x())
+          if (inside(g.centerOf(i))) occupancy->setState(i, state);
+  }
+  void pillar(double x, double y, double radius) {
+    fill([=](const Eigen::Vector3d& p) { return std::hypot(p.x() - x, p.y() - y) <= radius; });
+  }
+  void box(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) {
+    fill([=](const Eigen::Vector3d& p) { return (p.array() >= lo.array()).all() && (p.array() <= hi.array()).all(); });
+  }
+  /// A seeded random forest (plan_env/map_generator.h) over the whole window.
+  void forest(ObstacleDensity density, uint32_t seed) { generateForest(ForestConfig::preset(density), seed, occupancy.get()); }
+  /// Call after carving: computes the ESDF.
+  const EsdfMap& finish() {
+    EsdfMap::Config c;
+    c.max_distance_m = 2.0;
+    std::string err;
+    esdf = EsdfMap::create(c, occupancy, &err);
+    esdf->updateAll();
+    return *esdf;
+  }
+};
+
+}  // namespace test
+}  // namespace topo_planner

@@ -1,0 +1,288 @@
+#include "replan_suite.h"
+
+#include <algorithm>
+#include <cmath>
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <iomanip>
+#include <random>
+#include <set>
+#include <sstream>
+
+#include "path_searching/path_shortener.h"
+#include "plan_env/map_generator.h"
+
+namespace topo_planner {
+namespace bench {
+
+namespace {
+
+double msSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+double percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, size_t(q * double(v.size() - 1) + 0.5))];
+}
+
+FlatState rest(const Eigen::Vector3d& p) {
+  FlatState s;
+  s.position = p;
+  return s;
+}
+
+}  // namespace
+
+const char* toString(Method m) {
+  switch (m) {
+    case Method::kProposed: return "proposed";
+    case Method::kGto: return "gto";
+    case Method::kGtoRestart: return "gto_restart";
+    case Method::kAstarPgo: return "astar_pgo";
+  }
+  return "?";
+}
+
+bool parseMethod(const std::string& s, Method* m) {
+  for (Method x : allMethods())
+    if (s == toString(x)) {
+      *m = x;
+      return true;
+    }
+  return false;
+}
+
+const std::vector<Method>& allMethods() {
+  static const std::vector<Method> all{Method::kProposed, Method::kGto, Method::kGtoRestart, Method::kAstarPgo};
+  return all;
+}
+
+TopoReplanner::Config benchmarkReplannerConfig(const SuiteConfig& suite) {
+  TopoReplanner::Config c;
+  c.horizon_m = 1e3;  // the whole task is one local problem
+  c.optimizer.max_vel_mps = suite.max_vel_mps;
+  c.optimizer.max_acc_mps2 = suite.max_acc_mps2;
+  c.num_threads = 2;
+  if (suite.deterministic) {
+    c.search.roadmap.max_time_s = 0.0;
+    c.optimizer.max_time_s = 0.0;
+  }
+  return c;
+}
+
+TaskOutcome runMethod(Method method, TopoReplanner& replanner, const PathGuidedOptimizer& optimizer, GridAStar& astar,
+                      const EsdfMap& map, const PolynomialTrajectory& reference, int restarts, uint32_t seed) {
+  TaskOutcome out;
+  out.method = method;
+  ReplanRequest req;
+  req.start = reference.state(0.0);
+  req.reference = &reference;
+  if (method == Method::kProposed) {
+    const ReplanResult r = replanner.replan(map, req);
+    out.ok = r.status == ReplanStatus::kSuccess;
+    out.status = r.message.empty() ? toString(r.status) : r.message;
+    out.search_ms = r.stats.search_ms;
+    out.opt_ms = r.stats.optimize_ms;
+    out.total_ms = r.stats.total_ms;
+    out.paths = r.stats.paths;
+    if (out.ok) {
+      out.trajectory = r.trajectory;
+      if (r.chosen >= 0) out.min_clearance_m = r.candidates[size_t(r.chosen)].result.stats.min_clearance_m;
+    }
+  } else {
+    const LocalProblem lp = replanner.localProblem(map, req);
+    if (lp.status != ReplanStatus::kSuccess) {
+      out.status = lp.message;
+    } else {
+      OptimizationResult o;
+      if (method == Method::kGto) {
+        o = optimizer.gto(lp.initial, map);
+      } else if (method == Method::kGtoRestart) {
+        o = optimizer.gtoWithRestarts(lp.initial, map, restarts, seed);
+      } else {
+        const auto t0 = std::chrono::steady_clock::now();
+        const GridAStar::Result a = astar.search(map, lp.start, lp.goal);
+        Path guide;
+        if (a.status == SearchStatus::kSuccess) {
+          const VisibilityChecker checker(map, replanner.config().astar.clearance_m, true);
+          guide = PathShortener(checker).shorten(a.path);
+        }
+        out.search_ms = msSince(t0);
+        out.paths = guide.empty() ? 0 : 1;
+        if (guide.empty()) {
+          out.status = toString(a.status);
+          out.total_ms = out.search_ms;
+          return out;
+        }
+        o = optimizer.optimize(lp.initial, guide, map);
+      }
+      out.ok = o.status == OptimizationStatus::kSuccess;
+      out.status = toString(o.status);
+      out.opt_ms = o.stats.total_ms;
+      out.min_clearance_m = o.stats.min_clearance_m;
+      if (out.ok) out.trajectory = o.spline;
+    }
+  }
+  // The proposed method's time is its whole replan() call (reference check and local problem
+  // included); the baselines' is their search and optimisation.
+  out.total_ms = method == Method::kProposed ? out.total_ms : out.search_ms + out.opt_ms;
+  if (out.ok) {
+    out.jerk_integral = out.trajectory.jerkIntegral();
+    out.duration_s = out.trajectory.duration();
+  }
+  return out;
+}
+
+std::vector<TaskOutcome> runSuite(const SuiteConfig& config, const std::vector<ObstacleDensity>& densities) {
+  std::vector<TaskOutcome> outcomes;
+  const TopoReplanner::Config rc = benchmarkReplannerConfig(config);
+  std::string err;
+  auto replanner = TopoReplanner::create(rc, &err);
+  const PathGuidedOptimizer optimizer(rc.optimizer);
+  GridAStar astar(rc.astar);
+  ReferenceConfig ref_config;
+  ref_config.max_vel_mps = config.max_vel_mps;
+  ref_config.max_acc_mps2 = config.max_acc_mps2;
+  const int total = int(densities.size()) * config.maps_per_density * config.tasks_per_map;
+  int done = 0;
+  for (ObstacleDensity density : densities) {
+    int trial = 0;
+    for (int m = 0; m < config.maps_per_density; ++m) {
+      OccupancyMap::Config oc;
+      oc.size_m = config.map_size_m;
+      oc.origin_m = Eigen::Vector3d::Zero();
+      auto occ = std::shared_ptr<OccupancyMap>(OccupancyMap::create(oc, &err));
+      const uint32_t map_seed = 1000u * uint32_t(density) + uint32_t(m);
+      generateForest(ForestConfig::preset(density), map_seed, occ.get());
+      auto esdf = EsdfMap::create(EsdfMap::Config(), occ, &err);
+      esdf->updateAll();
+      const VisibilityChecker line(*esdf, rc.search.clearance_m, true);
+      std::mt19937 rng(map_seed * 7919u + 13u);
+      std::uniform_real_distribution<double> ux(1.5, config.map_size_m.x() - 1.5), uy(1.5, config.map_size_m.y() - 1.5),
+          uz(1.0, std::min(2.0, config.map_size_m.z() - 1.0));
+      auto roomy = [&](const Eigen::Vector3d& p) {
+        const DistanceQuery q = esdf->query(p);
+        return q.status == QueryStatus::kOk && q.distance >= config.task_clearance_m;
+      };
+      for (int k = 0; k < config.tasks_per_map;) {
+        const Eigen::Vector3d s(ux(rng), uy(rng), uz(rng)), g(ux(rng), uy(rng), uz(rng));
+        const double d = (g - s).norm();
+        if (d < config.min_task_length_m || d > config.max_task_length_m || !roomy(s) || !roomy(g) || line.lineVisible(s, g))
+          continue;
+        PolynomialTrajectory reference;
+        if (referenceTrajectory({s, g}, rest(s), rest(g), ref_config, &reference) != TrajectoryStatus::kSuccess) continue;
+        ++k;
+        for (Method method : allMethods()) {
+          TaskOutcome o = runMethod(method, *replanner, optimizer, astar, *esdf, reference, config.gto_restarts,
+                                    uint32_t(trial) * 31u + 7u);
+          o.density = toString(density);
+          o.trial = trial;
+          o.trajectory = UniformBspline();  // not kept: the suite only reports
+          outcomes.push_back(std::move(o));
+        }
+        ++trial;
+        ++done;
+        const int width = 40, filled = width * done / std::max(1, total);
+        std::fprintf(stderr, "\r[%s%s] %d/%d tasks (%s)   ", std::string(size_t(filled), '#').c_str(),
+                     std::string(size_t(width - filled), '.').c_str(), done, total, toString(density));
+      }
+    }
+  }
+  std::fprintf(stderr, "\n");
+  return outcomes;
+}
+
+std::map<std::string, std::map<Method, MethodSummary>> summarize(const std::vector<TaskOutcome>& outcomes) {
+  std::map<std::string, std::map<Method, MethodSummary>> out;
+  // Tasks every method solved, per density.
+  std::map<std::string, std::map<int, int>> solved_by;
+  for (const TaskOutcome& o : outcomes)
+    if (o.ok) ++solved_by[o.density][o.trial];
+  const int methods = int(allMethods().size());
+  std::map<std::string, std::map<Method, std::vector<double>>> times, search, opt, jerk_all, jerk_common;
+  for (const TaskOutcome& o : outcomes) {
+    MethodSummary& s = out[o.density][o.method];
+    ++s.tasks;
+    s.solved += o.ok;
+    times[o.density][o.method].push_back(o.total_ms);
+    search[o.density][o.method].push_back(o.search_ms);
+    opt[o.density][o.method].push_back(o.opt_ms);
+    if (o.ok) jerk_all[o.density][o.method].push_back(o.jerk_integral);
+    if (o.ok && solved_by[o.density][o.trial] == methods) jerk_common[o.density][o.method].push_back(o.jerk_integral);
+  }
+  auto mean = [](const std::vector<double>& v) {
+    double s = 0.0;
+    for (double x : v) s += x;
+    return v.empty() ? 0.0 : s / double(v.size());
+  };
+  for (auto& [density, per_method] : out)
+    for (auto& [method, s] : per_method) {
+      s.time_median_ms = percentile(times[density][method], 0.5);
+      s.time_p95_ms = percentile(times[density][method], 0.95);
+      s.search_median_ms = percentile(search[density][method], 0.5);
+      s.opt_median_ms = percentile(opt[density][method], 0.5);
+      s.jerk_all_mean = mean(jerk_all[density][method]);
+      s.jerk_common_mean = mean(jerk_common[density][method]);
+      s.common = int(jerk_common[density][method].size());
+    }
+  return out;
+}
+
+std::string markdownTable(const std::map<std::string, std::map<Method, MethodSummary>>& summary) {
+  std::ostringstream t;
+  t << "| Density | Method | Comp. time median (ms) = search + opt | Comp. time p95 (ms) | Success rate (%) | "
+       "Smoothness, tasks all solved (m^2/s^5) | Smoothness, own solved (m^2/s^5) |\n";
+  t << "|---|---|---|---|---|---|---|\n";
+  t << std::fixed;
+  for (const char* density : {"low", "medium", "high"}) {
+    auto it = summary.find(density);
+    if (it == summary.end()) continue;
+    for (Method m : allMethods()) {
+      auto jt = it->second.find(m);
+      if (jt == it->second.end()) continue;
+      const MethodSummary& s = jt->second;
+      t << "| " << density << " | " << toString(m) << " | " << std::setprecision(2) << s.time_median_ms << " = "
+        << s.search_median_ms << " + " << s.opt_median_ms << " | " << s.time_p95_ms << " | " << std::setprecision(1)
+        << 100.0 * s.successRate() << " (" << s.solved << "/" << s.tasks << ") | " << std::setprecision(3)
+        << s.jerk_common_mean << " (n=" << s.common << ") | " << s.jerk_all_mean << " |\n";
+    }
+  }
+  return t.str();
+}
+
+bool writeCsv(const std::vector<TaskOutcome>& outcomes, const std::string& path) {
+  std::ofstream f(path);
+  if (!f) return false;
+  f << "density,trial,method,ok,status,search_ms,opt_ms,total_ms,paths,jerk_integral,duration_s,min_clearance_m\n";
+  f << std::setprecision(9);
+  for (const TaskOutcome& o : outcomes)
+    f << o.density << "," << o.trial << "," << toString(o.method) << "," << int(o.ok) << ",\"" << o.status << "\","
+      << o.search_ms << "," << o.opt_ms << "," << o.total_ms << "," << o.paths << "," << o.jerk_integral << ","
+      << o.duration_s << "," << o.min_clearance_m << "\n";
+  return bool(f);
+}
+
+double jerkRatio(const std::vector<TaskOutcome>& outcomes, Method a, Method b, int* common) {
+  std::map<std::pair<std::string, int>, std::pair<double, double>> pairs;  // (ja, jb); NaN when unsolved
+  for (const TaskOutcome& o : outcomes) {
+    if (o.method != a && o.method != b) continue;
+    auto& p = pairs.try_emplace({o.density, o.trial}, NAN, NAN).first->second;
+    (o.method == a ? p.first : p.second) = o.ok ? o.jerk_integral : NAN;
+  }
+  double sa = 0.0, sb = 0.0;
+  int n = 0;
+  for (const auto& [key, p] : pairs)
+    if (std::isfinite(p.first) && std::isfinite(p.second)) {
+      sa += p.first;
+      sb += p.second;
+      ++n;
+    }
+  if (common) *common = n;
+  return sb > 0.0 ? sa / sb : NAN;
+}
+
+}  // namespace bench
+}  // namespace topo_planner

@@ -1,0 +1,82 @@
+#pragma once
+// The replanning benchmark of the paper's Table I, shared by the benchmark executables and the CI
+// test: seeded random forests at three densities (plan_env/map_generator.h), random replanning
+// tasks whose straight reference is blocked, and four methods started from the same reference
+// trajectory (a rest-to-rest minimum-snap line) and the same local problem:
+//   proposed    topological guide paths + parallel PGO (TopoReplanner)
+//   gto         the refine phase alone from the reference segment (like the paper's TRR baseline)
+//   gto_restart GTO with random restarts, best of N (like Ewok's restarts)
+//   astar_pgo   PGO guided by a single A* path (what the topological paths add)
+// Success: the optimiser's final check (collision-free along the curve at its clearance, velocity
+// and acceleration within the limits).
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "plan_env/map_generator.h"
+#include "topo_replan/topo_replanner.h"
+
+namespace topo_planner {
+namespace bench {
+
+enum class Method { kProposed, kGto, kGtoRestart, kAstarPgo };
+const char* toString(Method m);
+bool parseMethod(const std::string& s, Method* m);
+const std::vector<Method>& allMethods();
+
+struct SuiteConfig {
+  int maps_per_density = 10;
+  int tasks_per_map = 50;
+  Eigen::Vector3d map_size_m{20.0, 20.0, 3.0};
+  double min_task_length_m = 6.0, max_task_length_m = 10.0;
+  double task_clearance_m = 0.5;  ///< start and goal at least this far from obstacles [m]
+  int gto_restarts = 5;
+  double max_vel_mps = 3.0, max_acc_mps2 = 2.5;
+  bool deterministic = true;      ///< counts only (no time limits)
+};
+
+struct TaskOutcome {
+  std::string density;
+  int trial = 0;
+  Method method = Method::kProposed;
+  bool ok = false;
+  std::string status;
+  double search_ms = 0.0, opt_ms = 0.0, total_ms = 0.0;
+  int paths = 0;
+  double jerk_integral = 0.0, duration_s = 0.0, min_clearance_m = 0.0;
+  UniformBspline trajectory;
+};
+
+/// The replanner configuration used by every method (optimiser, search, A*).
+TopoReplanner::Config benchmarkReplannerConfig(const SuiteConfig& suite);
+
+/// Runs one method on one task. `replanner` provides the shared local problem and the proposed
+/// method; the baselines use optimizer and astar.
+TaskOutcome runMethod(Method method, TopoReplanner& replanner, const PathGuidedOptimizer& optimizer, GridAStar& astar,
+                      const EsdfMap& map, const PolynomialTrajectory& reference, int restarts, uint32_t seed);
+
+/// Runs the suite: every method on every task of every density. Progress on stderr.
+std::vector<TaskOutcome> runSuite(const SuiteConfig& config, const std::vector<ObstacleDensity>& densities);
+
+struct MethodSummary {
+  int tasks = 0, solved = 0;
+  double time_median_ms = 0.0, time_p95_ms = 0.0, search_median_ms = 0.0, opt_median_ms = 0.0;
+  double jerk_common_mean = 0.0;  ///< over the tasks every method solved
+  double jerk_all_mean = 0.0;     ///< over the tasks this method solved
+  int common = 0;
+  double successRate() const { return tasks ? double(solved) / tasks : 0.0; }
+};
+/// summary[density][method]
+std::map<std::string, std::map<Method, MethodSummary>> summarize(const std::vector<TaskOutcome>& outcomes);
+
+/// The paper's Table I layout, as Markdown.
+std::string markdownTable(const std::map<std::string, std::map<Method, MethodSummary>>& summary);
+bool writeCsv(const std::vector<TaskOutcome>& outcomes, const std::string& path);
+/// Mean jerk integral of method a over that of method b, on the tasks both solved (all densities).
+double jerkRatio(const std::vector<TaskOutcome>& outcomes, Method a, Method b, int* common = nullptr);
+
+}  // namespace bench
+}  // namespace topo_planner

@@ -1,0 +1,139 @@
+#pragma once
+// The replanner of the paper (Sect. V, Fig. 5): given the map, the current state and the global
+// reference trajectory, it checks the reference within the replanning horizon; if it collides, it
+// searches topologically distinct guide paths between the current position and the first safe
+// reference point at or past the horizon (path_searching), optimises one trajectory per path with
+// the two-phase path-guided optimisation (bspline_opt) in parallel on a pool of workers it owns, and
+// returns the best verified one.
+//
+// Selection: among the candidates that passed the optimiser's final check (collision-free along the
+// curve at its clearance, velocity and acceleration within limits), the one with the least
+//   cost = jerk integral [m^2/s^5] + duration_weight * duration [s]
+// (duration_weight = 0 by default: the paper's smoothness criterion). Ties go to the shorter guide.
+//
+// Determinism: with the search's max_time_s and the optimiser's max_time_s at 0, every budget is a
+// count and the result does not depend on the number of workers or on timing (tested).
+//
+// Threads: replan() is not reentrant (one caller at a time); inside, each worker uses its own
+// optimiser and writes only its own candidate; the map is only read.
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "bspline_opt/path_guided_optimizer.h"
+#include "path_searching/grid_astar.h"
+#include "path_searching/topo_path_search.h"
+#include "plan_env/thread_pool.h"
+#include "topo_replan/polynomial_trajectory.h"
+
+namespace topo_planner {
+
+enum class ReplanStatus {
+  kSuccess,
+  kStartInCollision,    ///< the current position is closer than the optimiser's clearance to an obstacle
+  kGoalInCollision,     ///< no safe reference point at or past the horizon
+  kGoalOutOfMap,        ///< the local goal lies outside the map
+  kInvalidInput,        ///< NaN/inf state, empty reference, invalid config
+  kNoPath,              ///< neither the topological search nor A* found a guide path
+  kOptimizationFailed,  ///< no candidate passed the final check
+};
+const char* toString(ReplanStatus status);
+
+/// What the caller can fall back on when the status is not kSuccess.
+enum class ReplanFallback {
+  kNone,           ///< a verified trajectory is returned
+  kKeepReference,  ///< the reference is free for safe_prefix_s more seconds: keep flying it and retry
+  kStop,           ///< nothing safe ahead: brake now
+};
+const char* toString(ReplanFallback fallback);
+
+struct ReplanRequest {
+  FlatState start;                                ///< current state (its position, velocity, acceleration)
+  const PolynomialTrajectory* reference = nullptr;  ///< the global reference
+  double reference_time_s = 0.0;                  ///< time on the reference where the local segment begins
+};
+
+/// The local replanning problem every method starts from (the replanner and the baselines alike):
+/// the reference checked within the horizon, the local goal, and the colliding reference segment
+/// fitted as the initial B-spline from the start state to the local goal.
+struct LocalProblem {
+  ReplanStatus status = ReplanStatus::kInvalidInput;  ///< kSuccess when the problem is well posed
+  std::string message;
+  Eigen::Vector3d start = Eigen::Vector3d::Zero();
+  Eigen::Vector3d goal = Eigen::Vector3d::Zero();
+  double start_time_s = 0.0;           ///< reference time of the local start
+  double goal_time_s = 0.0;            ///< reference time of the local goal
+  double collision_time_s = -1.0;      ///< first colliding reference time in the horizon; -1 if none
+  double horizon_end_time_s = 0.0;
+  UniformBspline initial;              ///< the reference segment as a cubic B-spline
+};
+
+struct ReplanCandidate {
+  Path guide;
+  OptimizationResult result;
+  double selection_cost = INFINITY;  ///< see the class comment; +inf when it failed
+};
+
+struct ReplanStats {
+  bool searched = false;         ///< false when the reference was free within the horizon
+  bool used_astar = false;       ///< the topological search found nothing and A* gave the guide
+  double check_ms = 0.0;         ///< reference check and local problem
+  double search_ms = 0.0;        ///< topological search (+ A* fallback)
+  double optimize_ms = 0.0;      ///< the parallel optimisation, wall time
+  double total_ms = 0.0;
+  int paths = 0;                 ///< guide paths optimised
+  int feasible_candidates = 0;   ///< candidates that passed the final check
+  TopoSearchStats search;
+};
+
+struct ReplanResult {
+  ReplanStatus status = ReplanStatus::kInvalidInput;
+  std::string message;
+  UniformBspline trajectory;          ///< valid when status == kSuccess; starts at request.start
+  double local_start_time_s = 0.0;    ///< reference time of the local start
+  double local_goal_time_s = 0.0;     ///< reference time the trajectory rejoins the reference at
+  double reference_collision_time_s = -1.0;  ///< first colliding reference time in the horizon; -1 if none
+  std::vector<ReplanCandidate> candidates;   ///< one per guide path (for visualisation)
+  int chosen = -1;                    ///< index into candidates; -1 when the reference itself was kept
+  ReplanFallback fallback = ReplanFallback::kNone;
+  double safe_prefix_s = 0.0;         ///< with kKeepReference: collision-free reference time left
+  ReplanStats stats;
+};
+
+class TopoReplanner {
+ public:
+  struct Config {
+    TopoPathSearch::Config search;        ///< guide paths (Sect. IV)
+    PathGuidedOptimizer::Config optimizer;  ///< PGO (Sect. III); its clearance_m is the final check's
+    GridAStar::Config astar;              ///< fallback guide when the topological search finds none
+    double horizon_m = 7.0;               ///< length of reference checked and replanned [m]
+    double reference_clearance_m = 0.3;   ///< the reference collides where the ESDF is below this [m]
+    double reference_sample_s = 0.01;     ///< time step of the reference check [s]
+    double control_point_spacing_m = 0.35;  ///< initial spline: about one control point per this [m]
+    int num_threads = 2;                  ///< optimisation workers, the caller included
+    double duration_weight = 0.0;         ///< selection cost weight of the duration [m^2/s^6]
+
+    bool validate(std::string* why) const;
+  };
+
+  /// nullptr with a reason for an invalid config.
+  static std::unique_ptr<TopoReplanner> create(const Config& config, std::string* error);
+  const Config& config() const { return config_; }
+
+  ReplanResult replan(const EsdfMap& map, const ReplanRequest& request);
+
+  /// The local problem of a request (what replan() starts from), for baselines and diagnostics.
+  LocalProblem localProblem(const EsdfMap& map, const ReplanRequest& request) const;
+
+ private:
+  explicit TopoReplanner(const Config& config);
+
+  Config config_;
+  ThreadPool pool_;
+  std::vector<PathGuidedOptimizer> optimizers_;  // one per worker
+  TopoPathSearch search_;
+  GridAStar astar_;
+};
+
+}  // namespace topo_planner

@@ -1,0 +1,226 @@
+#include "topo_replan/topo_replanner.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <sstream>
+
+#include "path_searching/path_shortener.h"
+
+namespace topo_planner {
+
+namespace {
+
+double msSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+bool finiteState(const FlatState& s) {
+  return s.position.allFinite() && s.velocity.allFinite() && s.acceleration.allFinite() && s.jerk.allFinite();
+}
+
+}  // namespace
+
+const char* toString(ReplanStatus status) {
+  switch (status) {
+    case ReplanStatus::kSuccess: return "success";
+    case ReplanStatus::kStartInCollision: return "start in collision";
+    case ReplanStatus::kGoalInCollision: return "no safe local goal on the reference";
+    case ReplanStatus::kGoalOutOfMap: return "local goal out of the map";
+    case ReplanStatus::kInvalidInput: return "invalid input";
+    case ReplanStatus::kNoPath: return "no guide path";
+    case ReplanStatus::kOptimizationFailed: return "no candidate passed the final check";
+  }
+  return "unknown status";
+}
+
+const char* toString(ReplanFallback fallback) {
+  switch (fallback) {
+    case ReplanFallback::kNone: return "none";
+    case ReplanFallback::kKeepReference: return "keep the reference (safe prefix)";
+    case ReplanFallback::kStop: return "stop";
+  }
+  return "?";
+}
+
+bool TopoReplanner::Config::validate(std::string* why) const {
+  std::ostringstream err;
+  std::string sub;
+  if (!search.validate(&sub)) err << "search: " << sub << "; ";
+  if (!optimizer.validate(&sub)) err << "optimizer: " << sub << "; ";
+  if (!(std::isfinite(horizon_m) && horizon_m > 0.0)) err << "horizon_m must be positive; ";
+  if (!(std::isfinite(reference_clearance_m) && reference_clearance_m >= 0.0)) err << "reference_clearance_m must be >= 0; ";
+  if (!(reference_sample_s > 0.0 && reference_sample_s < 1.0)) err << "reference_sample_s must be in (0, 1); ";
+  if (!(control_point_spacing_m > 0.0)) err << "control_point_spacing_m must be positive; ";
+  if (num_threads < 1 || num_threads > 64) err << "num_threads must be in [1, 64]; ";
+  if (!(std::isfinite(duration_weight) && duration_weight >= 0.0)) err << "duration_weight must be >= 0; ";
+  const std::string s = err.str();
+  if (why) *why = s.empty() ? "" : s.substr(0, s.size() - 2);
+  return s.empty();
+}
+
+std::unique_ptr<TopoReplanner> TopoReplanner::create(const Config& config, std::string* error) {
+  std::string why;
+  if (!config.validate(&why)) {
+    if (error) *error = "invalid replanner config: " + why;
+    return nullptr;
+  }
+  return std::unique_ptr<TopoReplanner>(new TopoReplanner(config));
+}
+
+TopoReplanner::TopoReplanner(const Config& config)
+    : config_(config),
+      pool_(config.num_threads),
+      optimizers_(size_t(config.num_threads), PathGuidedOptimizer(config.optimizer)),
+      search_(config.search),
+      astar_(config.astar) {}
+
+LocalProblem TopoReplanner::localProblem(const EsdfMap& map, const ReplanRequest& request) const {
+  LocalProblem lp;
+  auto fail = [&](ReplanStatus status, const std::string& message) {
+    lp.status = status;
+    lp.message = message;
+    return lp;
+  };
+  if (!request.reference || request.reference->empty() || !finiteState(request.start) ||
+      !std::isfinite(request.reference_time_s))
+    return fail(ReplanStatus::kInvalidInput, "no reference, or a NaN/inf state or time");
+  const PolynomialTrajectory& ref = *request.reference;
+  const FlatState& start = request.start;
+  const double t0 = std::clamp(request.reference_time_s, 0.0, ref.duration());
+  lp.start = start.position;
+  lp.start_time_s = t0;
+
+  const DistanceQuery at_start = map.query(start.position);
+  if (at_start.status == QueryStatus::kOutOfMap || at_start.status == QueryStatus::kInvalidInput)
+    return fail(ReplanStatus::kInvalidInput, "the start is outside the map");
+  if (at_start.distance < config_.optimizer.clearance_m)
+    return fail(ReplanStatus::kStartInCollision, "the start is closer than the clearance to an obstacle");
+
+  // The reference within the horizon: where does it first collide, where does the horizon end.
+  const double dt = config_.reference_sample_s, T = ref.duration();
+  auto collides = [&](double t) {
+    const DistanceQuery q = map.query(ref.position(t));
+    return q.status == QueryStatus::kOutOfMap || q.status == QueryStatus::kInvalidInput ||
+           q.distance < config_.reference_clearance_m;
+  };
+  double arc = 0.0, t_h = t0;
+  Eigen::Vector3d previous = start.position;
+  while (t_h < T && arc < config_.horizon_m) {
+    const double t_next = std::min(T, t_h + dt);
+    const Eigen::Vector3d p = ref.position(t_next);
+    arc += (p - previous).norm();
+    previous = p;
+    t_h = t_next;
+    if (lp.collision_time_s < 0.0 && collides(t_h)) lp.collision_time_s = t_h;
+  }
+  lp.horizon_end_time_s = t_h;
+
+  // The local goal: the horizon end, moved forward along the reference to the first safe point.
+  double t_g = t_h;
+  while (t_g < T && collides(t_g)) t_g = std::min(T, t_g + dt);
+  lp.goal_time_s = t_g;
+  lp.goal = ref.position(t_g);
+  if (map.query(lp.goal).status == QueryStatus::kOutOfMap)
+    return fail(ReplanStatus::kGoalOutOfMap, "the local goal is outside the map");
+  if (collides(t_g)) return fail(ReplanStatus::kGoalInCollision, "the reference is in collision up to its end");
+
+  // The initial trajectory: the reference segment from the start to the local goal as a B-spline,
+  // about one control point per control_point_spacing_m.
+  double seg_arc = 0.0;
+  Eigen::Vector3d prev = start.position;
+  for (double t = t0; t < t_g; t += dt) {
+    const Eigen::Vector3d p = ref.position(std::min(t + dt, t_g));
+    seg_arc += (p - prev).norm();
+    prev = p;
+  }
+  const int segments = std::max(4, int(std::ceil(seg_arc / config_.control_point_spacing_m)));
+  const double interval = (t_g - t0) / segments;
+  if (!(interval > 1e-4)) return fail(ReplanStatus::kInvalidInput, "the local segment is too short to replan");
+  std::vector<Eigen::Vector3d> points{start.position};
+  for (int k = 1; k <= segments; ++k) points.push_back(ref.position(t0 + k * interval));
+  if (!UniformBspline::fitToPoints(points, interval, start.velocity, start.acceleration, ref.velocity(t_g),
+                                   ref.acceleration(t_g), 3, &lp.initial))
+    return fail(ReplanStatus::kInvalidInput, "the reference segment could not be fitted");
+  lp.status = ReplanStatus::kSuccess;
+  return lp;
+}
+
+ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& request) {
+  const auto t_begin = std::chrono::steady_clock::now();
+  ReplanResult result;
+  const LocalProblem lp = localProblem(map, request);
+  result.local_start_time_s = lp.start_time_s;
+  result.local_goal_time_s = lp.goal_time_s;
+  result.reference_collision_time_s = lp.collision_time_s;
+  result.stats.check_ms = msSince(t_begin);
+  auto fail = [&](ReplanStatus status, const std::string& message) {
+    result.status = status;
+    result.message = message;
+    if (status != ReplanStatus::kInvalidInput && status != ReplanStatus::kStartInCollision) {
+      const double free_until = lp.collision_time_s >= 0.0 ? lp.collision_time_s : lp.horizon_end_time_s;
+      result.safe_prefix_s = std::max(0.0, free_until - lp.start_time_s);
+      result.fallback = result.safe_prefix_s > 0.5 ? ReplanFallback::kKeepReference : ReplanFallback::kStop;
+    } else if (status == ReplanStatus::kStartInCollision) {
+      result.fallback = ReplanFallback::kStop;
+    }
+    result.stats.total_ms = msSince(t_begin);
+    return result;
+  };
+  if (lp.status != ReplanStatus::kSuccess) return fail(lp.status, lp.message);
+
+  // A free reference within the horizon is kept (as a verified spline), without searching.
+  if (lp.collision_time_s < 0.0) {
+    const OptimizationResult checked = optimizers_.front().check(lp.initial, map);
+    if (checked.status == OptimizationStatus::kSuccess) {
+      result.status = ReplanStatus::kSuccess;
+      result.trajectory = checked.spline;
+      result.stats.total_ms = msSince(t_begin);
+      return result;
+    }
+  }
+
+  // Guide paths: topological search, or A* when it finds none.
+  result.stats.searched = true;
+  auto t_search = std::chrono::steady_clock::now();
+  const TopoSearchResult search = search_.search(map, lp.start, lp.goal);
+  result.stats.search = search.stats;
+  std::vector<Path> guides = search.paths;
+  if (search.status != SearchStatus::kSuccess || guides.empty()) {
+    const GridAStar::Result astar = astar_.search(map, lp.start, lp.goal);
+    if (astar.status == SearchStatus::kSuccess) {
+      const VisibilityChecker checker(map, config_.astar.clearance_m, config_.astar.unknown_is_free);
+      guides = {PathShortener(checker).shorten(astar.path)};
+      result.stats.used_astar = true;
+    }
+  }
+  result.stats.search_ms = msSince(t_search);
+  if (guides.empty()) return fail(ReplanStatus::kNoPath, std::string("no guide path: ") + toString(search.status));
+
+  // One path-guided optimisation per guide, in parallel; each worker has its own optimiser.
+  auto t_opt = std::chrono::steady_clock::now();
+  result.candidates.resize(guides.size());
+  pool_.parallelFor(int(guides.size()), [&](int i, int worker) {
+    ReplanCandidate& c = result.candidates[size_t(i)];
+    c.guide = guides[size_t(i)];
+    c.result = optimizers_[size_t(worker)].optimize(lp.initial, c.guide, map);
+    if (c.result.status == OptimizationStatus::kSuccess)
+      c.selection_cost = c.result.cost.jerk_integral_m2ps5 + config_.duration_weight * c.result.cost.duration_s;
+  });
+  result.stats.optimize_ms = msSince(t_opt);
+  result.stats.paths = int(guides.size());
+  for (size_t i = 0; i < result.candidates.size(); ++i) {
+    const ReplanCandidate& c = result.candidates[i];
+    if (!std::isfinite(c.selection_cost)) continue;
+    ++result.stats.feasible_candidates;
+    if (result.chosen < 0 || c.selection_cost < result.candidates[size_t(result.chosen)].selection_cost)
+      result.chosen = int(i);
+  }
+  if (result.chosen < 0) return fail(ReplanStatus::kOptimizationFailed, "no candidate is collision-free and feasible");
+  result.status = ReplanStatus::kSuccess;
+  result.trajectory = result.candidates[size_t(result.chosen)].result.spline;
+  result.stats.total_ms = msSince(t_begin);
+  return result;
+}
+
+}  // namespace topo_planner

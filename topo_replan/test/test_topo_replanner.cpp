@@ -1,0 +1,196 @@
+// The replanner on synthetic scenes: the paper's claims as checkable facts.
+#include <gtest/gtest.h>
+
+#include <memory>
+
+#include "topo_replan/topo_replanner.h"
+
+namespace topo_planner {
+namespace {
+
+struct Scene {
+  std::shared_ptr<OccupancyMap> occ;
+  std::unique_ptr<EsdfMap> esdf;
+  explicit Scene(const Eigen::Vector3d& size) {
+    OccupancyMap::Config c;
+    c.size_m = size;
+    c.origin_m = Eigen::Vector3d::Zero();
+    std::string err;
+    occ = std::shared_ptr<OccupancyMap>(OccupancyMap::create(c, &err));
+    fill([](const Eigen::Vector3d&) { return true; }, VoxelState::kFree);
+  }
+  template <typename F>
+  void fill(F&& inside, VoxelState s = VoxelState::kOccupied) {
+    const GridGeometry& g = occ->geometry();
+    const VoxelBox w = g.windowBox();
+    Eigen::Vector3i i;
+    for (i.z() = w.min.z(); i.z() <= w.max.z(); ++i.z())
+      for (i.y() = w.min.y(); i.y() <= w.max.y(); ++i.y())
+        for (i.x() = w.min.x(); i.x() <= w.max.x(); ++i.x())
+          if (inside(g.centerOf(i))) occ->setState(i, s);
+  }
+  const EsdfMap& finish() {
+    std::string err;
+    esdf = EsdfMap::create(EsdfMap::Config(), occ, &err);
+    esdf->updateAll();
+    return *esdf;
+  }
+};
+
+FlatState at(const Eigen::Vector3d& p) {
+  FlatState s;
+  s.position = p;
+  return s;
+}
+
+PolynomialTrajectory straightReference(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+  PolynomialTrajectory ref;
+  EXPECT_EQ(referenceTrajectory({a, b}, at(a), at(b), ReferenceConfig(), &ref), TrajectoryStatus::kSuccess);
+  return ref;
+}
+
+TopoReplanner::Config deterministicConfig(int threads) {
+  TopoReplanner::Config c;
+  c.num_threads = threads;
+  c.horizon_m = 12.0;
+  c.search.roadmap.max_time_s = 0.0;  // counts only
+  c.optimizer.max_time_s = 0.0;
+  return c;
+}
+
+// y of the spline where it crosses x = x0 (sampled).
+double yAtX(const UniformBspline& s, double x0) {
+  for (double t = 0.0; t < s.duration(); t += 0.005) {
+    const Eigen::Vector3d a = s.evaluate(t), b = s.evaluate(t + 0.005);
+    if ((a.x() - x0) * (b.x() - x0) <= 0.0) return a.y();
+  }
+  return NAN;
+}
+
+TEST(TopoReplanner, PillarAcrossTheReference) {
+  Scene scene({12.0, 8.0, 3.0});
+  scene.fill([](const Eigen::Vector3d& p) { return std::hypot(p.x() - 6.0, p.y() - 4.0) <= 0.6; });
+  const EsdfMap& map = scene.finish();
+  const PolynomialTrajectory ref = straightReference({1, 4, 1.5}, {11, 4, 1.5});
+  std::string err;
+  auto replanner = TopoReplanner::create(deterministicConfig(2), &err);
+  ASSERT_TRUE(replanner) << err;
+  ReplanRequest req;
+  req.start = ref.state(0.0);
+  req.reference = &ref;
+  const ReplanResult r = replanner->replan(map, req);
+  ASSERT_EQ(r.status, ReplanStatus::kSuccess) << r.message;
+  EXPECT_TRUE(r.stats.searched);
+  EXPECT_GT(r.reference_collision_time_s, 0.0);
+  ASSERT_GE(r.candidates.size(), 2u);
+  // At least two verified candidates, on different sides of the pillar.
+  int left = 0, right = 0;
+  for (const ReplanCandidate& c : r.candidates) {
+    if (c.result.status != OptimizationStatus::kSuccess) continue;
+    const double y = yAtX(c.result.spline, 6.0);
+    left += y > 4.0;
+    right += y < 4.0;
+  }
+  EXPECT_GE(left, 1);
+  EXPECT_GE(right, 1);
+  // The chosen trajectory: starts at the start, clears the pillar, within the limits.
+  ASSERT_GE(r.chosen, 0);
+  const UniformBspline& traj = r.trajectory;
+  EXPECT_LT((traj.evaluate(0.0) - req.start.position).norm(), 1e-6);
+  EXPECT_LE(traj.maxVelocity(), 3.0 + 1e-6);
+  EXPECT_LE(traj.maxAcceleration(), 2.5 + 1e-6);
+  for (double t = 0.0; t <= traj.duration(); t += 0.01) {
+    const DistanceQuery q = map.query(traj.evaluate(t));
+    ASSERT_GE(q.distance, replanner->config().optimizer.clearance_m - 1e-6) << "t = " << t;
+  }
+  EXPECT_NEAR((traj.evaluate(traj.duration()) - ref.position(r.local_goal_time_s)).norm(), 0.0, 1e-6);
+}
+
+TEST(TopoReplanner, FreeReferenceIsKeptWithoutSearching) {
+  Scene scene({12.0, 8.0, 3.0});
+  const EsdfMap& map = scene.finish();
+  const PolynomialTrajectory ref = straightReference({1, 4, 1.5}, {11, 4, 1.5});
+  std::string err;
+  auto replanner = TopoReplanner::create(deterministicConfig(2), &err);
+  ReplanRequest req;
+  req.start = ref.state(0.0);
+  req.reference = &ref;
+  const ReplanResult r = replanner->replan(map, req);
+  ASSERT_EQ(r.status, ReplanStatus::kSuccess) << r.message;
+  EXPECT_FALSE(r.stats.searched);
+  EXPECT_EQ(r.chosen, -1);
+  EXPECT_TRUE(r.candidates.empty());
+  EXPECT_LT(r.reference_collision_time_s, 0.0);
+  // It follows the reference.
+  for (double s = 0.0; s <= 1.0; s += 0.1) {
+    const Eigen::Vector3d p = r.trajectory.evaluate(s * r.trajectory.duration());
+    EXPECT_NEAR(p.y(), 4.0, 0.05);
+    EXPECT_NEAR(p.z(), 1.5, 0.05);
+  }
+}
+
+TEST(TopoReplanner, BadInputsGetTheirStatus) {
+  Scene scene({12.0, 8.0, 3.0});
+  scene.fill([](const Eigen::Vector3d& p) { return std::hypot(p.x() - 6.0, p.y() - 4.0) <= 0.6; });
+  scene.fill([](const Eigen::Vector3d& p) { return p.x() > 10.5 && p.x() < 11.5; });  // a wall at the end
+  const EsdfMap& map = scene.finish();
+  std::string err;
+  auto replanner = TopoReplanner::create(deterministicConfig(2), &err);
+  const PolynomialTrajectory to_wall = straightReference({1, 4, 1.5}, {11, 4, 1.5});
+  ReplanRequest req;
+  req.reference = &to_wall;
+  req.start = to_wall.state(0.0);
+  EXPECT_EQ(replanner->replan(map, req).status, ReplanStatus::kGoalInCollision);
+  const ReplanResult stopped = replanner->replan(map, req);
+  EXPECT_NE(stopped.fallback, ReplanFallback::kNone);
+
+  const PolynomialTrajectory ref = straightReference({1, 4, 1.5}, {9, 4, 1.5});
+  req.reference = &ref;
+  req.start = at({6.0, 4.0, 1.5});  // inside the pillar
+  EXPECT_EQ(replanner->replan(map, req).status, ReplanStatus::kStartInCollision);
+  req.start = ref.state(0.0);
+  req.start.velocity.x() = NAN;
+  EXPECT_EQ(replanner->replan(map, req).status, ReplanStatus::kInvalidInput);
+  req.start = ref.state(0.0);
+  req.reference_time_s = INFINITY;
+  EXPECT_EQ(replanner->replan(map, req).status, ReplanStatus::kInvalidInput);
+  req.reference_time_s = 0.0;
+  req.reference = nullptr;
+  EXPECT_EQ(replanner->replan(map, req).status, ReplanStatus::kInvalidInput);
+
+  const PolynomialTrajectory leaving = straightReference({1, 2, 1.5}, {20, 2, 1.5});
+  req.reference = &leaving;
+  req.start = leaving.state(0.0);
+  EXPECT_EQ(replanner->replan(map, req).status, ReplanStatus::kGoalOutOfMap);
+
+  TopoReplanner::Config bad = deterministicConfig(2);
+  bad.horizon_m = -1.0;
+  EXPECT_FALSE(TopoReplanner::create(bad, &err));
+  EXPECT_NE(err.find("horizon_m"), std::string::npos);
+}
+
+TEST(TopoReplanner, PoolGivesTheSameResultAsOneWorker) {
+  Scene scene({12.0, 8.0, 3.0});
+  scene.fill([](const Eigen::Vector3d& p) { return std::hypot(p.x() - 6.0, p.y() - 4.0) <= 0.6; });
+  scene.fill([](const Eigen::Vector3d& p) { return std::hypot(p.x() - 4.0, p.y() - 2.5) <= 0.4; });
+  scene.fill([](const Eigen::Vector3d& p) { return std::hypot(p.x() - 8.0, p.y() - 5.5) <= 0.4; });
+  const EsdfMap& map = scene.finish();
+  const PolynomialTrajectory ref = straightReference({1, 4, 1.5}, {11, 4, 1.5});
+  std::string err;
+  auto one = TopoReplanner::create(deterministicConfig(1), &err);
+  auto two = TopoReplanner::create(deterministicConfig(2), &err);
+  ReplanRequest req;
+  req.start = ref.state(0.0);
+  req.reference = &ref;
+  const ReplanResult a = one->replan(map, req), b = two->replan(map, req), c = two->replan(map, req);
+  ASSERT_EQ(a.status, ReplanStatus::kSuccess) << a.message;
+  ASSERT_EQ(b.status, ReplanStatus::kSuccess);
+  ASSERT_EQ(a.candidates.size(), b.candidates.size());
+  EXPECT_EQ(a.chosen, b.chosen);
+  EXPECT_EQ(a.trajectory.controlPoints(), b.trajectory.controlPoints());
+  EXPECT_EQ(b.trajectory.controlPoints(), c.trajectory.controlPoints());
+  EXPECT_EQ(a.trajectory.knotSpan(), b.trajectory.knotSpan());
+}
+
+}  // namespace
+}  // namespace topo_planner
