@@ -6,7 +6,7 @@ WS := $(ROOT)/build/ws
 CATKIN_ARGS := -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=Release
 BIN = $(1)/devel/lib/topo_planner
 
-.PHONY: deps build test bench bench-env bench-topo bench-opt demo test-asan test-tsan clean
+.PHONY: deps build test bench bench-env bench-topo bench-opt bench-replan bench-forest-gen demo test-asan test-tsan clean
 
 deps:
 	@bash scripts/install_deps.sh

@@ -5,6 +5,8 @@
 set -euo pipefail
 bin=$1 data=$2 out=$3
 [ -f "$data/start_and_end.csv" ] || { echo "no forest_gen data in $data" >&2; exit 1; }
+echo "| method | tasks | success | total ms median | p95 |"
+echo "|---|---|---|---|---|"
 for method in proposed gto gto_restart astar_pgo; do
   for map in "$data"/octomaps/forest*.bt; do
     id=$(basename "$map" .bt); id=${id#forest}

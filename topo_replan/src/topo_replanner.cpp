@@ -180,41 +180,50 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
     }
   }
 
-  // Guide paths: topological search, or A* when it finds none.
+  // Guide paths: the topological search.
   result.stats.searched = true;
   auto t_search = std::chrono::steady_clock::now();
   const TopoSearchResult search = search_.search(map, lp.start, lp.goal);
   result.stats.search = search.stats;
-  std::vector<Path> guides = search.paths;
-  if (search.status != SearchStatus::kSuccess || guides.empty()) {
-    const GridAStar::Result astar = astar_.search(map, lp.start, lp.goal);
-    if (astar.status == SearchStatus::kSuccess) {
-      const VisibilityChecker checker(map, config_.astar.clearance_m, config_.astar.unknown_is_free);
-      guides = {PathShortener(checker).shorten(astar.path)};
-      result.stats.used_astar = true;
-    }
-  }
   result.stats.search_ms = msSince(t_search);
-  if (guides.empty()) return fail(ReplanStatus::kNoPath, std::string("no guide path: ") + toString(search.status));
 
   // One path-guided optimisation per guide, in parallel; each worker has its own optimiser.
-  auto t_opt = std::chrono::steady_clock::now();
-  result.candidates.resize(guides.size());
-  pool_.parallelFor(int(guides.size()), [&](int i, int worker) {
-    ReplanCandidate& c = result.candidates[size_t(i)];
-    c.guide = guides[size_t(i)];
-    c.result = optimizers_[size_t(worker)].optimize(lp.initial, c.guide, map);
-    if (c.result.status == OptimizationStatus::kSuccess)
-      c.selection_cost = c.result.cost.jerk_integral_m2ps5 + config_.duration_weight * c.result.cost.duration_s;
-  });
-  result.stats.optimize_ms = msSince(t_opt);
-  result.stats.paths = int(guides.size());
-  for (size_t i = 0; i < result.candidates.size(); ++i) {
-    const ReplanCandidate& c = result.candidates[i];
-    if (!std::isfinite(c.selection_cost)) continue;
-    ++result.stats.feasible_candidates;
-    if (result.chosen < 0 || c.selection_cost < result.candidates[size_t(result.chosen)].selection_cost)
-      result.chosen = int(i);
+  auto optimizeAll = [&](const std::vector<Path>& guides) {
+    auto t_opt = std::chrono::steady_clock::now();
+    const size_t first = result.candidates.size();
+    result.candidates.resize(first + guides.size());
+    pool_.parallelFor(int(guides.size()), [&](int i, int worker) {
+      ReplanCandidate& c = result.candidates[first + size_t(i)];
+      c.guide = guides[size_t(i)];
+      c.result = optimizers_[size_t(worker)].optimize(lp.initial, c.guide, map);
+      if (c.result.status == OptimizationStatus::kSuccess)
+        c.selection_cost = c.result.cost.jerk_integral_m2ps5 + config_.duration_weight * c.result.cost.duration_s;
+    });
+    result.stats.optimize_ms += msSince(t_opt);
+    result.stats.paths += int(guides.size());
+    for (size_t i = first; i < result.candidates.size(); ++i) {
+      const ReplanCandidate& c = result.candidates[i];
+      if (!std::isfinite(c.selection_cost)) continue;
+      ++result.stats.feasible_candidates;
+      if (result.chosen < 0 || c.selection_cost < result.candidates[size_t(result.chosen)].selection_cost)
+        result.chosen = int(i);
+    }
+  };
+  if (search.status == SearchStatus::kSuccess) optimizeAll(search.paths);
+
+  // Last resort, when the search found nothing or no candidate passed: one A* guide.
+  if (result.chosen < 0) {
+    t_search = std::chrono::steady_clock::now();
+    const GridAStar::Result astar = astar_.search(map, lp.start, lp.goal);
+    result.stats.search_ms += msSince(t_search);
+    if (astar.status == SearchStatus::kSuccess) {
+      const VisibilityChecker checker(map, config_.astar.clearance_m, config_.astar.unknown_is_free);
+      result.stats.used_astar = true;
+      optimizeAll({PathShortener(checker).shorten(astar.path)});
+    } else if (result.candidates.empty()) {
+      return fail(ReplanStatus::kNoPath, std::string("no guide path: ") + toString(search.status) + ", A*: " +
+                                             toString(astar.status));
+    }
   }
   if (result.chosen < 0) return fail(ReplanStatus::kOptimizationFailed, "no candidate is collision-free and feasible");
   result.status = ReplanStatus::kSuccess;

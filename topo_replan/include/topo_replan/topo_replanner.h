@@ -4,7 +4,8 @@
 // searches topologically distinct guide paths between the current position and the first safe
 // reference point at or past the horizon (path_searching), optimises one trajectory per path with
 // the two-phase path-guided optimisation (bspline_opt) in parallel on a pool of workers it owns, and
-// returns the best verified one.
+// returns the best verified one. When the search finds no path, or no candidate passes the final
+// check, one more candidate guided by a grid A* path is tried as a last resort.
 //
 // Selection: among the candidates that passed the optimiser's final check (collision-free along the
 // curve at its clearance, velocity and acceleration within limits), the one with the least
@@ -77,7 +78,7 @@ struct ReplanCandidate {
 
 struct ReplanStats {
   bool searched = false;         ///< false when the reference was free within the horizon
-  bool used_astar = false;       ///< the topological search found nothing and A* gave the guide
+  bool used_astar = false;       ///< an A* guide was tried (the search found nothing or no candidate passed)
   double check_ms = 0.0;         ///< reference check and local problem
   double search_ms = 0.0;        ///< topological search (+ A* fallback)
   double optimize_ms = 0.0;      ///< the parallel optimisation, wall time
@@ -106,7 +107,7 @@ class TopoReplanner {
   struct Config {
     TopoPathSearch::Config search;        ///< guide paths (Sect. IV)
     PathGuidedOptimizer::Config optimizer;  ///< PGO (Sect. III); its clearance_m is the final check's
-    GridAStar::Config astar;              ///< fallback guide when the topological search finds none
+    GridAStar::Config astar;              ///< last-resort guide (no topological path, or none passed)
     double horizon_m = 7.0;               ///< length of reference checked and replanned [m]
     double reference_clearance_m = 0.3;   ///< the reference collides where the ESDF is below this [m]
     double reference_sample_s = 0.01;     ///< time step of the reference check [s]
