@@ -38,46 +38,6 @@ double guideCost(const Eigen::MatrixX3d& q, const Eigen::MatrixX3d& guide, int f
   return cost;
 }
 
-bool interpolateDistance(const EsdfMap& map, const Eigen::Vector3d& point, double* distance,
-                         Eigen::Vector3d* gradient) {
-  if (!point.allFinite()) return false;
-  const GridGeometry& g = map.geometry();
-  const Eigen::Vector3d pm = point * g.inverseResolution() - Eigen::Vector3d::Constant(0.5);
-  if ((pm.array().abs() > 1e9).any()) return false;
-  const Eigen::Vector3d fl = pm.array().floor();
-  const Eigen::Vector3i base = fl.cast<int>();
-  const Eigen::Vector3d t = pm - fl;
-  // Both corners in the window: the 8 voxels are.
-  if (!g.inWindow(base) || !g.inWindow(Eigen::Vector3i(base + Eigen::Vector3i::Ones()))) return false;
-  double v[2][2][2];
-  for (int dx = 0; dx < 2; ++dx)
-    for (int dy = 0; dy < 2; ++dy)
-      for (int dz = 0; dz < 2; ++dz) {
-        float d = 0.0f;
-        map.voxelDistance(base + Eigen::Vector3i(dx, dy, dz), &d);
-        v[dx][dy][dz] = d;
-      }
-  // x, then y, then z; the gradient is the derivative of the same trilinear polynomial.
-  double vx[2][2], dvx[2][2];
-  for (int dy = 0; dy < 2; ++dy)
-    for (int dz = 0; dz < 2; ++dz) {
-      vx[dy][dz] = (1 - t.x()) * v[0][dy][dz] + t.x() * v[1][dy][dz];
-      dvx[dy][dz] = v[1][dy][dz] - v[0][dy][dz];
-    }
-  double vxy[2], dxy_x[2], dxy_y[2];
-  for (int dz = 0; dz < 2; ++dz) {
-    vxy[dz] = (1 - t.y()) * vx[0][dz] + t.y() * vx[1][dz];
-    dxy_x[dz] = (1 - t.y()) * dvx[0][dz] + t.y() * dvx[1][dz];
-    dxy_y[dz] = vx[1][dz] - vx[0][dz];
-  }
-  *distance = (1 - t.z()) * vxy[0] + t.z() * vxy[1];
-  if (gradient) {
-    gradient->x() = ((1 - t.z()) * dxy_x[0] + t.z() * dxy_x[1]) * g.inverseResolution();
-    gradient->y() = ((1 - t.z()) * dxy_y[0] + t.z() * dxy_y[1]) * g.inverseResolution();
-    gradient->z() = (vxy[1] - vxy[0]) * g.inverseResolution();
-  }
-  return true;
-}
 
 double collisionCost(const Eigen::MatrixX3d& q, int first, int last, const EsdfMap& map, double d0_m, double weight,
                      Eigen::MatrixX3d* grad) {
@@ -86,7 +46,7 @@ double collisionCost(const Eigen::MatrixX3d& q, int first, int last, const EsdfM
   for (int i = first; i <= last; ++i) {
     double distance;
     Eigen::Vector3d gradient;
-    if (!interpolateDistance(map, q.row(i).transpose(), &distance, &gradient)) continue;
+    if (!map.interpolate(q.row(i).transpose(), &distance, &gradient)) continue;
     const double excess = d0_m - distance;
     if (excess <= 0.0) continue;
     cost += excess * excess;

@@ -8,7 +8,7 @@
 
 #include "bspline_opt/bspline_costs.h"
 #include "bspline_opt/path_guided_optimizer.h"
-#include "test_scenes.h"
+#include "plan_env/synthetic_scene.h"
 
 namespace topo_planner {
 namespace {
@@ -50,7 +50,7 @@ class CostGradients : public ::testing::Test {
     for (int i = 0; i < n; ++i) q.row(i) << uxy(rng), uxy(rng), uz(rng);
     return q;
   }
-  test::Scene scene_;
+  SyntheticScene scene_;
 };
 
 TEST_F(CostGradients, EachTermMatchesCentralDifferences) {
@@ -105,7 +105,7 @@ TEST_F(CostGradients, InterpolationEqualsEsdfQuery) {
     const DistanceQuery q = map.query(p);
     double d = 0.0;
     Eigen::Vector3d g;
-    const bool ok = interpolateDistance(map, p, &d, &g);
+    const bool ok = map.interpolate(p, &d, &g);
     ASSERT_EQ(ok, q.status == QueryStatus::kOk || q.status == QueryStatus::kUnknown) << p.transpose();
     if (!ok) continue;
     ++inside;
@@ -114,8 +114,8 @@ TEST_F(CostGradients, InterpolationEqualsEsdfQuery) {
   }
   EXPECT_GT(inside, 10000);
   double d;
-  EXPECT_FALSE(interpolateDistance(map, Eigen::Vector3d(NAN, 1, 1), &d, nullptr));
-  EXPECT_FALSE(interpolateDistance(map, Eigen::Vector3d(1e300, 1, 1), &d, nullptr));
+  EXPECT_FALSE(map.interpolate(Eigen::Vector3d(NAN, 1, 1), &d, nullptr));
+  EXPECT_FALSE(map.interpolate(Eigen::Vector3d(1e300, 1, 1), &d, nullptr));
 }
 
 TEST_F(CostGradients, TermsAreZeroWhereThePaperSaysSo) {

@@ -8,7 +8,7 @@
 #include "bspline_opt/path_guided_optimizer.h"
 #include "path_searching/grid_astar.h"
 #include "path_searching/path_shortener.h"
-#include "test_scenes.h"
+#include "plan_env/synthetic_scene.h"
 
 namespace topo_planner {
 namespace {
@@ -77,7 +77,7 @@ bool polylineFree(const Path& p, const EsdfMap& map, double clearance) {
 // ridge inside it. The ESDF gradients on its control points point back and forth along the
 // trajectory, never sideways, so phase 2 alone stays in collision; the guide path pulls it round.
 TEST(PathGuidedOptimizer, WideBoxRidgeDefeatsGtoButNotPgo) {
-  test::Scene scene({12.0, 10.0, 3.0});
+  SyntheticScene scene({12.0, 10.0, 3.0});
   scene.box({5.0, 2.0, -1.0}, {7.0, 8.0, 4.0});  // 2 m thick, 6 m wide, full height
   const EsdfMap& map = scene.finish();
   const Eigen::Vector3d start(1.0, 5.0, 1.5), goal(11.0, 5.0, 1.5);
@@ -108,7 +108,7 @@ TEST(PathGuidedOptimizer, WideBoxRidgeDefeatsGtoButNotPgo) {
 // Between two pillars 0.3 m apart the trajectory sits on the ESDF ridge of the gap (a saddle: a
 // maximum across it, a minimum along it): the gradients push along the gap, not out of it.
 TEST(PathGuidedOptimizer, NarrowGapBetweenPillarsDefeatsGtoButNotPgo) {
-  test::Scene scene({10.0, 8.0, 3.0});
+  SyntheticScene scene({10.0, 8.0, 3.0});
   scene.pillar(5.0, 4.0 + 0.55, 0.4);
   scene.pillar(5.0, 4.0 - 0.55, 0.4);
   const EsdfMap& map = scene.finish();
@@ -128,7 +128,7 @@ TEST(PathGuidedOptimizer, NarrowGapBetweenPillarsDefeatsGtoButNotPgo) {
 // Seeded forest tasks: every result reported successful passes the independent dense oracle, and
 // PGO (guide from grid A* + shortening) succeeds at least as often as GTO, and on nearly all tasks.
 TEST(PathGuidedOptimizer, ForestTasksSuccessMeansSafeAndFeasible) {
-  test::Scene scene({20.0, 20.0, 3.0});
+  SyntheticScene scene({20.0, 20.0, 3.0});
   scene.forest(ObstacleDensity::kMedium, 1001);
   const EsdfMap& map = scene.finish();
   GridAStar::Config ac;
@@ -164,7 +164,7 @@ TEST(PathGuidedOptimizer, ForestTasksSuccessMeansSafeAndFeasible) {
 }
 
 TEST(PathGuidedOptimizer, FeasibilityIsEnforcedByTimeReallocation) {
-  test::Scene scene({12.0, 10.0, 3.0});
+  SyntheticScene scene({12.0, 10.0, 3.0});
   scene.box({5.0, 2.0, -1.0}, {7.0, 8.0, 4.0});
   const EsdfMap& map = scene.finish();
   const Eigen::Vector3d start(1.0, 5.0, 1.5), goal(11.0, 5.0, 1.5);
@@ -192,7 +192,7 @@ TEST(PathGuidedOptimizer, FeasibilityIsEnforcedByTimeReallocation) {
 }
 
 TEST(PathGuidedOptimizer, InvalidInputIsAStatusNotACrash) {
-  test::Scene scene({6.0, 6.0, 3.0});
+  SyntheticScene scene({6.0, 6.0, 3.0});
   const EsdfMap& map = scene.finish();
   const PathGuidedOptimizer optimizer(testConfig());
   const UniformBspline good = UniformBspline::straightLine({1, 1, 1}, {5, 5, 1}, 20, 3, 0.3);
@@ -248,7 +248,7 @@ TEST(PathGuidedOptimizer, InvalidInputIsAStatusNotACrash) {
 }
 
 TEST(PathGuidedOptimizer, NonFiniteCostIsOptimizationFailed) {
-  test::Scene scene({6.0, 6.0, 3.0});
+  SyntheticScene scene({6.0, 6.0, 3.0});
   const EsdfMap& map = scene.finish();
   // A valid spline whose velocities overflow: (1 m / 1e-200 s)^2 is infinite.
   const UniformBspline s = UniformBspline::straightLine({1, 1, 1}, {5, 5, 1}, 20, 3, 1e-200);
@@ -261,14 +261,14 @@ TEST(PathGuidedOptimizer, NonFiniteCostIsOptimizationFailed) {
 }
 
 TEST(PathGuidedOptimizer, OutOfMapIsReported) {
-  test::Scene scene({6.0, 6.0, 3.0});
+  SyntheticScene scene({6.0, 6.0, 3.0});
   const EsdfMap& map = scene.finish();
   const UniformBspline s = UniformBspline::straightLine({1, 1, 1}, {9, 1, 1}, 20, 3, 0.5);  // ends outside
   EXPECT_EQ(PathGuidedOptimizer(testConfig()).check(s, map).status, OptimizationStatus::kOutOfMap);
 }
 
 TEST(PathGuidedOptimizer, AlgorithmsAndRestartsAreRepeatable) {
-  test::Scene scene({12.0, 10.0, 3.0});
+  SyntheticScene scene({12.0, 10.0, 3.0});
   scene.box({5.0, 2.0, -1.0}, {7.0, 8.0, 4.0});
   const EsdfMap& map = scene.finish();
   const UniformBspline initial = reference({1.0, 5.0, 1.5}, {11.0, 5.0, 1.5});
@@ -304,7 +304,7 @@ TEST(PathGuidedOptimizer, AlgorithmsAndRestartsAreRepeatable) {
 // One optimizer per worker (and one shared const optimizer) on a shared const map: the results equal
 // the sequential ones bit for bit (no hidden shared state). Run under ThreadSanitizer too.
 TEST(PathGuidedOptimizer, ParallelWorkersMatchSequential) {
-  test::Scene scene({12.0, 10.0, 3.0});
+  SyntheticScene scene({12.0, 10.0, 3.0});
   scene.box({5.0, 2.0, -1.0}, {7.0, 8.0, 4.0});
   scene.pillar(3.0, 7.0, 0.4);
   const EsdfMap& map = scene.finish();

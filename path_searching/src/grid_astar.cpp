@@ -39,7 +39,8 @@ GridAStar::Result GridAStar::search(const EsdfMap& map, const Eigen::Vector3d& s
     parent_.resize(volume);
     generation_ = 0;
   }
-  if (++generation_ == 0) {
+  // The top bit marks closed voxels: restart the stamps before the generation reaches it.
+  if (++generation_ >= 0x7fffffffu) {
     std::fill(stamp_.begin(), stamp_.end(), 0u);
     generation_ = 1;
   }

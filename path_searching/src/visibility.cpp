@@ -58,21 +58,8 @@ bool VisibilityChecker::lineVisible(const Eigen::Vector3d& a, const Eigen::Vecto
     const Eigen::Vector3i v = g.indexOf(p);
     float d;
     if (!esdf_.voxelDistance(v, &d) || d < clearance_) return blockedAt(v);
-    double next = t;
-    const double rho = double(d - clearance_) - half_diagonal;
-    if (rho > 0.0) {
-      const Eigen::Vector3d w = p - g.centerOf(v);
-      const double wu = w.dot(u), ww = w.squaredNorm(), disc = wu * wu - (ww - rho * rho);
-      if (ww <= rho * rho && disc >= 0.0) next = t + (-wu + std::sqrt(disc));
-    }
-    if (next <= t + nudge) {  // step into the next voxel along the segment
-      double step = INFINITY;
-      for (int k = 0; k < 3; ++k) {
-        if (u[k] > 0.0) step = std::min(step, ((v[k] + 1) * res - p[k]) / u[k]);
-        if (u[k] < 0.0) step = std::min(step, (v[k] * res - p[k]) / u[k]);
-      }
-      next = t + std::max(step, 0.0) + nudge;
-    }
+    double next = t + distanceToBallExit(p, u, g.centerOf(v), double(d - clearance_) - half_diagonal);
+    if (next <= t + nudge) next = t + distanceToVoxelExit(p, u, v, res) + nudge;  // into the next voxel
     if (next >= length) return true;  // the voxel of b has been read or lies in the ball
     t = next;
   }

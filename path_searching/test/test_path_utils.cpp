@@ -2,7 +2,7 @@
 
 #include "path_searching/path.h"
 #include "path_searching/visibility.h"
-#include "scenes.h"
+#include "plan_env/synthetic_scene.h"
 
 namespace topo_planner {
 namespace {
@@ -29,7 +29,7 @@ class UvdPillar : public ::testing::Test {
     scene_.pillar(5.0, 4.0, 0.5);
     checker_ = std::make_unique<VisibilityChecker>(scene_.finish(), 0.2, true);
   }
-  test::Scene scene_;
+  SyntheticScene scene_;
   std::unique_ptr<VisibilityChecker> checker_;
 };
 

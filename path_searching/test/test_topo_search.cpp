@@ -3,11 +3,13 @@
 #include <malloc.h>
 
 #include <atomic>
+#include <random>
 #include <new>
 
 #include "path_searching/grid_astar.h"
+#include "plan_env/raycast.h"
 #include "path_searching/topo_path_search.h"
-#include "scenes.h"
+#include "plan_env/synthetic_scene.h"
 
 // Live heap bytes of this test binary, for the memory test: every replaceable form of global new
 // and delete goes through these two (under AddressSanitizer too).
@@ -50,12 +52,36 @@ TopoPathSearch::Config searchConfig(int samples = 400) {
   return c;
 }
 
-// True when every segment keeps the clearance.
+// True when every voxel every segment passes through keeps the clearance: an oracle independent of
+// the sphere tracing in VisibilityChecker (a plain DDA reading every voxel).
 bool collisionFree(const Path& p, const EsdfMap& map, double clearance) {
   const VisibilityChecker checker(map, clearance, true);
-  for (size_t i = 1; i < p.size(); ++i)
-    if (!checker.lineVisible(p[i - 1], p[i])) return false;
+  for (size_t i = 1; i < p.size(); ++i) {
+    const bool clear = traverseVoxels(p[i - 1], p[i], map.geometry().resolution(),
+                                      [&](const Eigen::Vector3i& v) { return checker.isFreeVoxel(v); });
+    if (!clear) return false;
+  }
   return true;
+}
+
+TEST(Visibility, SphereTracingAgreesWithAPlainDda) {
+  SyntheticScene scene({10.0, 8.0, 3.0});
+  scene.pillar(5.0, 4.0, 0.5);
+  scene.pillar(3.0, 2.5, 0.4);
+  scene.box({6.5, 5.0, 0.5}, {7.5, 6.0, 1.5});
+  const EsdfMap& map = scene.finish();
+  const VisibilityChecker checker(map, 0.3, true);
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> ux(0.3, 9.7), uy(0.3, 7.7), uz(0.3, 2.7);
+  int blocked = 0;
+  for (int k = 0; k < 3000; ++k) {
+    const Eigen::Vector3d a(ux(rng), uy(rng), uz(rng)), b(ux(rng), uy(rng), uz(rng));
+    const bool dda = collisionFree({a, b}, map, 0.3);
+    ASSERT_EQ(checker.lineVisible(a, b), dda) << a.transpose() << " -> " << b.transpose();
+    blocked += !dda;
+  }
+  EXPECT_GT(blocked, 300);  // both outcomes well represented
+  EXPECT_LT(blocked, 2700);
 }
 
 // Lateral (y) offset of the path where it crosses x = x0.
@@ -80,7 +106,7 @@ void expectPairwiseDistinct(const std::vector<Path>& paths, const EsdfMap& map, 
 }
 
 TEST(TopoSearch, FreeStraightLineGivesTheSegment) {
-  test::Scene scene({10.0, 8.0, 3.0});
+  SyntheticScene scene({10.0, 8.0, 3.0});
   const EsdfMap& map = scene.finish();
   TopoPathSearch search(searchConfig());
   const Eigen::Vector3d s(1, 4, 1.5), g(9, 4, 1.5);
@@ -93,7 +119,7 @@ TEST(TopoSearch, FreeStraightLineGivesTheSegment) {
 }
 
 TEST(TopoSearch, OnePillarGivesLeftAndRight) {
-  test::Scene scene({10.0, 8.0, 3.0});
+  SyntheticScene scene({10.0, 8.0, 3.0});
   scene.pillar(5.0, 4.0, 0.5);
   const EsdfMap& map = scene.finish();
   TopoPathSearch search(searchConfig());
@@ -114,7 +140,7 @@ TEST(TopoSearch, OnePillarGivesLeftAndRight) {
 }
 
 TEST(TopoSearch, WallWithTwoWindowsGivesOnePathThroughEach) {
-  test::Scene scene({10.0, 8.0, 4.0});
+  SyntheticScene scene({10.0, 8.0, 4.0});
   // Wall x in [4.85, 5.15] across the whole map, with two 1.2 m windows centred at y = 2 and 6, z = 2.
   scene.fill([](const Eigen::Vector3d& p) {
     if (p.x() < 4.85 || p.x() > 5.15) return false;
@@ -136,7 +162,7 @@ TEST(TopoSearch, WallWithTwoWindowsGivesOnePathThroughEach) {
 }
 
 TEST(TopoSearch, FloatingBoxOverUnderLeftRight) {
-  test::Scene scene({10.0, 8.0, 4.0});
+  SyntheticScene scene({10.0, 8.0, 4.0});
   scene.box({4.2, 3.2, 1.4}, {5.8, 4.8, 2.6});
   const EsdfMap& map = scene.finish();
   TopoPathSearch::Config c = searchConfig(800);
@@ -158,7 +184,7 @@ TEST(TopoSearch, FloatingBoxOverUnderLeftRight) {
 }
 
 TEST(TopoSearch, VerticalStartToGoalDirectionWorks) {
-  test::Scene scene({6.0, 6.0, 6.0});
+  SyntheticScene scene({6.0, 6.0, 6.0});
   scene.box({2.0, 2.0, 2.8}, {4.0, 4.0, 3.2});  // a slab between start and goal
   const EsdfMap& map = scene.finish();
   TopoPathSearch::Config c = searchConfig(600);
@@ -171,7 +197,7 @@ TEST(TopoSearch, VerticalStartToGoalDirectionWorks) {
 }
 
 TEST(TopoSearch, ShorteningIsSafeNotLongerAndEquivalent) {
-  test::Scene scene({10.0, 8.0, 3.0});
+  SyntheticScene scene({10.0, 8.0, 3.0});
   scene.pillar(5.0, 4.0, 0.5);
   scene.pillar(3.0, 2.5, 0.4);
   scene.pillar(7.0, 5.8, 0.4);
@@ -204,7 +230,7 @@ TEST(TopoSearch, ShorteningIsSafeNotLongerAndEquivalent) {
 }
 
 TEST(TopoSearch, BadInputsGetTheirStatus) {
-  test::Scene scene({10.0, 8.0, 3.0});
+  SyntheticScene scene({10.0, 8.0, 3.0});
   scene.pillar(5.0, 4.0, 0.5);
   const EsdfMap& map = scene.finish();
   TopoPathSearch search(searchConfig());
@@ -227,7 +253,7 @@ TEST(TopoSearch, BadInputsGetTheirStatus) {
 }
 
 TEST(TopoSearch, SameSeedSameResult) {
-  test::Scene scene({10.0, 8.0, 3.0});
+  SyntheticScene scene({10.0, 8.0, 3.0});
   scene.pillar(5.0, 4.0, 0.5);
   scene.pillar(3.0, 2.5, 0.4);
   const EsdfMap& map = scene.finish();
@@ -248,7 +274,7 @@ TEST(TopoSearch, SameSeedSameResult) {
 }
 
 TEST(TopoSearch, MemoryDoesNotGrowOver10000Calls) {
-  test::Scene scene({6.0, 4.0, 2.0});
+  SyntheticScene scene({6.0, 4.0, 2.0});
   scene.pillar(3.0, 2.0, 0.4);
   const EsdfMap& map = scene.finish();
   TopoPathSearch::Config c = searchConfig(60);
@@ -263,7 +289,7 @@ TEST(TopoSearch, MemoryDoesNotGrowOver10000Calls) {
 }
 
 TEST(GridAStar, FindsACollisionFreeNearShortestPath) {
-  test::Scene scene({10.0, 8.0, 3.0});
+  SyntheticScene scene({10.0, 8.0, 3.0});
   scene.pillar(5.0, 4.0, 0.5);
   const EsdfMap& map = scene.finish();
   GridAStar::Config c;
@@ -280,7 +306,7 @@ TEST(GridAStar, FindsACollisionFreeNearShortestPath) {
 }
 
 TEST(GridAStar, ReportsNoPathBudgetAndObstacles) {
-  test::Scene scene({10.0, 8.0, 3.0});
+  SyntheticScene scene({10.0, 8.0, 3.0});
   scene.box({4.8, -1.0, -1.0}, {5.2, 9.0, 4.0});  // a wall with no opening
   const EsdfMap& map = scene.finish();
   GridAStar::Config c;

@@ -30,6 +30,8 @@ std::unique_ptr<EsdfMap> EsdfMap::create(const Config& config, std::shared_ptr<c
   std::string why;
   if (!occupancy) why = "no occupancy map";
   if (why.empty() && !config.validate(&why)) why = "invalid ESDF config: " + why;
+  if (why.empty() && config.max_distance_m / occupancy->geometry().resolution() > 16384.0)
+    why = "invalid ESDF config: max_distance_m is more than 16384 voxels";
   if (!why.empty()) {
     if (error) *error = why;
     return nullptr;
@@ -295,29 +297,19 @@ DistanceQuery EsdfMap::nearest(const Eigen::Vector3d& point) const {
   return q;
 }
 
-DistanceQuery EsdfMap::query(const Eigen::Vector3d& point) const {
-  DistanceQuery q;
-  if (!point.allFinite()) {
-    q.status = QueryStatus::kInvalidInput;
-    return q;
-  }
+bool EsdfMap::interpolate(const Eigen::Vector3d& point, double* distance, Eigen::Vector3d* gradient) const {
+  if (!point.allFinite()) return false;
   const GridGeometry& g = geometry();
   const Eigen::Vector3d pm = point * g.inverseResolution() - Eigen::Vector3d::Constant(0.5);
-  if ((pm.array().abs() > 1e9).any()) return q;
+  if ((pm.array().abs() > 1e9).any()) return false;
   const Eigen::Vector3d fl = pm.array().floor();
   const Eigen::Vector3i base = fl.cast<int>();
   const Eigen::Vector3d t = pm - fl;
-  if (!g.inWindow(base) || !g.inWindow(Eigen::Vector3i(base + Eigen::Vector3i::Ones()))) return q;
-
+  if (!g.inWindow(base) || !g.inWindow(Eigen::Vector3i(base + Eigen::Vector3i::Ones()))) return false;
   double v[2][2][2];
-  bool unknown = false;
   for (int dx = 0; dx < 2; ++dx)
     for (int dy = 0; dy < 2; ++dy)
-      for (int dz = 0; dz < 2; ++dz) {
-        const Eigen::Vector3i i = base + Eigen::Vector3i(dx, dy, dz);
-        v[dx][dy][dz] = distance_[g.address(i)];
-        unknown |= occupancy_->state(i) == VoxelState::kUnknown;
-      }
+      for (int dz = 0; dz < 2; ++dz) v[dx][dy][dz] = distance_[g.address(base + Eigen::Vector3i(dx, dy, dz))];
   // Interpolate along x, then y, then z; the gradient is the derivative of the same polynomial.
   double vx[2][2], dvx[2][2];
   for (int dy = 0; dy < 2; ++dy)
@@ -331,10 +323,28 @@ DistanceQuery EsdfMap::query(const Eigen::Vector3d& point) const {
     dxy_x[dz] = (1 - t.y()) * dvx[0][dz] + t.y() * dvx[1][dz];
     dxy_y[dz] = vx[1][dz] - vx[0][dz];
   }
-  q.distance = (1 - t.z()) * vxy[0] + t.z() * vxy[1];
-  q.gradient.x() = ((1 - t.z()) * dxy_x[0] + t.z() * dxy_x[1]) * g.inverseResolution();
-  q.gradient.y() = ((1 - t.z()) * dxy_y[0] + t.z() * dxy_y[1]) * g.inverseResolution();
-  q.gradient.z() = (vxy[1] - vxy[0]) * g.inverseResolution();
+  *distance = (1 - t.z()) * vxy[0] + t.z() * vxy[1];
+  if (gradient) {
+    gradient->x() = ((1 - t.z()) * dxy_x[0] + t.z() * dxy_x[1]) * g.inverseResolution();
+    gradient->y() = ((1 - t.z()) * dxy_y[0] + t.z() * dxy_y[1]) * g.inverseResolution();
+    gradient->z() = (vxy[1] - vxy[0]) * g.inverseResolution();
+  }
+  return true;
+}
+
+DistanceQuery EsdfMap::query(const Eigen::Vector3d& point) const {
+  DistanceQuery q;
+  if (!point.allFinite()) {
+    q.status = QueryStatus::kInvalidInput;
+    return q;
+  }
+  if (!interpolate(point, &q.distance, &q.gradient)) return q;  // kOutOfMap
+  const GridGeometry& g = geometry();
+  const Eigen::Vector3i base = (point * g.inverseResolution() - Eigen::Vector3d::Constant(0.5)).array().floor().cast<int>();
+  bool unknown = false;
+  for (int k = 0; k < 8 && !unknown; ++k)
+    unknown = occupancy_->state(Eigen::Vector3i(base + Eigen::Vector3i(k & 1, (k >> 1) & 1, (k >> 2) & 1))) ==
+              VoxelState::kUnknown;
   q.status = unknown ? QueryStatus::kUnknown : QueryStatus::kOk;
   return q;
 }

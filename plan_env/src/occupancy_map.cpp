@@ -38,6 +38,8 @@ bool OccupancyMap::Config::validate(std::string* why) const {
   if (!(std::isfinite(resolution_m) && resolution_m > 0.0)) err << "resolution_m must be positive; ";
   if (!(size_m.allFinite() && (size_m.array() > 0.0).all())) err << "size_m must be positive; ";
   if (!origin_m.allFinite()) err << "origin_m must be finite; ";
+  if (origin_m.allFinite() && resolution_m > 0.0 && (origin_m.array().abs() / resolution_m > double(kMaxOriginIndex)).any())
+    err << "origin_m is too far from 0 for the voxel indices; ";
   for (double p : {prob_hit, prob_miss, prob_min, prob_max, prob_occupied})
     if (!probabilityInRange(p)) {
       err << "probabilities must be in (0, 1); ";

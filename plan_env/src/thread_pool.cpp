@@ -19,19 +19,27 @@ ThreadPool::~ThreadPool() {
 }
 
 void ThreadPool::runTasks(int worker) {
-  for (int task = next_task_.fetch_add(1); task < num_tasks_; task = next_task_.fetch_add(1)) (*job_)(task, worker);
+  for (int task = next_task_.fetch_add(1); task < num_tasks_; task = next_task_.fetch_add(1)) {
+    try {
+      (*job_)(task, worker);
+    } catch (...) {  // kept for the caller; the other tasks still run, so nobody waits forever
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!error_) error_ = std::current_exception();
+    }
+  }
 }
 
 void ThreadPool::parallelFor(int num_tasks, const std::function<void(int, int)>& fn) {
   if (num_tasks <= 0) return;
   std::lock_guard<std::mutex> call_lock(call_mutex_);
-  if (threads_.empty() || num_tasks == 1) {
+  if (threads_.empty() || num_tasks == 1) {  // inline; an exception propagates directly
     for (int t = 0; t < num_tasks; ++t) fn(t, 0);
     return;
   }
   {
     std::lock_guard<std::mutex> lock(mutex_);
     job_ = &fn;
+    error_ = nullptr;
     num_tasks_ = num_tasks;
     next_task_.store(0);
     busy_workers_ = int(threads_.size());
@@ -42,6 +50,12 @@ void ThreadPool::parallelFor(int num_tasks, const std::function<void(int, int)>&
   std::unique_lock<std::mutex> lock(mutex_);
   done_cv_.wait(lock, [this] { return busy_workers_ == 0; });
   job_ = nullptr;
+  if (error_) {
+    std::exception_ptr e = error_;
+    error_ = nullptr;
+    lock.unlock();
+    std::rethrow_exception(e);
+  }
 }
 
 void ThreadPool::workerLoop(int worker) {

@@ -150,6 +150,9 @@ TEST(BadConfig, RefusedWithAReason) {
   c.origin_m.z() = NAN;
   EXPECT_FALSE(OccupancyMap::create(c, &err));
   c = OccupancyMap::Config();
+  c.origin_m.x() = 1e12;  // finite, but no int voxel index reaches it
+  EXPECT_FALSE(OccupancyMap::create(c, &err));
+  c = OccupancyMap::Config();
   c.max_ray_length_m = 0.05;
   EXPECT_FALSE(OccupancyMap::create(c, &err));
   // Too large for memory: 1 km x 1 km x 100 m at 5 cm.
@@ -165,6 +168,10 @@ TEST(BadConfig, RefusedWithAReason) {
   EXPECT_FALSE(EsdfMap::create(e, occ, &err));
   e = EsdfMap::Config();
   e.inflate_radius_m = 5.0;  // above max_distance_m
+  EXPECT_FALSE(EsdfMap::create(e, occ, &err));
+  e = EsdfMap::Config();
+  e.max_distance_m = 1e4;  // 100,000 voxels: would overflow the squared distances
+  e.inflate_radius_m = 0.2;
   EXPECT_FALSE(EsdfMap::create(e, occ, &err));
   e = EsdfMap::Config();
   e.num_threads = 0;

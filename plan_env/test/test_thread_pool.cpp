@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <stdexcept>
 #include <thread>
 
 #include "plan_env/thread_pool.h"
@@ -52,6 +53,22 @@ TEST(ThreadPool, ConcurrentCallersAreSerialised) {
     });
   for (auto& t : callers) t.join();
   EXPECT_EQ(total.load(), 4 * 100 * 10);
+}
+
+TEST(ThreadPool, ExceptionsReachTheCallerAfterAllTasks) {
+  ThreadPool pool(2);
+  std::atomic<int> ran{0};
+  EXPECT_THROW(pool.parallelFor(50,
+                                [&](int task, int) {
+                                  ran.fetch_add(1);
+                                  if (task % 7 == 3) throw std::runtime_error("task failed");
+                                }),
+               std::runtime_error);
+  EXPECT_EQ(ran.load(), 50);
+  // The pool is still usable.
+  std::atomic<int> again{0};
+  pool.parallelFor(20, [&](int, int) { again.fetch_add(1); });
+  EXPECT_EQ(again.load(), 20);
 }
 
 }  // namespace

@@ -90,7 +90,8 @@ TaskOutcome runMethod(Method method, TopoReplanner& replanner, const PathGuidedO
     out.paths = r.stats.paths;
     if (out.ok) {
       out.trajectory = r.trajectory;
-      if (r.chosen >= 0) out.min_clearance_m = r.candidates[size_t(r.chosen)].result.stats.min_clearance_m;
+      out.min_clearance_m = r.chosen >= 0 ? r.candidates[size_t(r.chosen)].result.stats.min_clearance_m
+                                          : optimizer.check(r.trajectory, map).stats.min_clearance_m;
     }
   } else {
     const LocalProblem lp = replanner.localProblem(map, req);
@@ -233,7 +234,7 @@ std::map<std::string, std::map<Method, MethodSummary>> summarize(const std::vect
 
 std::string markdownTable(const std::map<std::string, std::map<Method, MethodSummary>>& summary) {
   std::ostringstream t;
-  t << "| Density | Method | Comp. time median (ms) = search + opt | Comp. time p95 (ms) | Success rate (%) | "
+  t << "| Density | Method | Comp. time median (ms) [median search / median opt] | Comp. time p95 (ms) | Success rate (%) | "
        "Smoothness, tasks all solved (m^2/s^5) | Smoothness, own solved (m^2/s^5) |\n";
   t << "|---|---|---|---|---|---|---|\n";
   t << std::fixed;
@@ -244,8 +245,8 @@ std::string markdownTable(const std::map<std::string, std::map<Method, MethodSum
       auto jt = it->second.find(m);
       if (jt == it->second.end()) continue;
       const MethodSummary& s = jt->second;
-      t << "| " << density << " | " << toString(m) << " | " << std::setprecision(2) << s.time_median_ms << " = "
-        << s.search_median_ms << " + " << s.opt_median_ms << " | " << s.time_p95_ms << " | " << std::setprecision(1)
+      t << "| " << density << " | " << toString(m) << " | " << std::setprecision(2) << s.time_median_ms << " ["
+        << s.search_median_ms << " / " << s.opt_median_ms << "] | " << s.time_p95_ms << " | " << std::setprecision(1)
         << 100.0 * s.successRate() << " (" << s.solved << "/" << s.tasks << ") | " << std::setprecision(3)
         << s.jerk_common_mean << " (n=" << s.common << ") | " << s.jerk_all_mean << " |\n";
     }

@@ -50,7 +50,7 @@ bool TopoReplanner::Config::validate(std::string* why) const {
   if (!optimizer.validate(&sub)) err << "optimizer: " << sub << "; ";
   if (!(std::isfinite(horizon_m) && horizon_m > 0.0)) err << "horizon_m must be positive; ";
   if (!(std::isfinite(reference_clearance_m) && reference_clearance_m >= 0.0)) err << "reference_clearance_m must be >= 0; ";
-  if (!(reference_sample_s > 0.0 && reference_sample_s < 1.0)) err << "reference_sample_s must be in (0, 1); ";
+  if (!(reference_sample_s >= 1e-4 && reference_sample_s < 1.0)) err << "reference_sample_s must be in [1e-4, 1); ";
   if (!(control_point_spacing_m > 0.0)) err << "control_point_spacing_m must be positive; ";
   if (num_threads < 1 || num_threads > 64) err << "num_threads must be in [1, 64]; ";
   if (!(std::isfinite(duration_weight) && duration_weight >= 0.0)) err << "duration_weight must be >= 0; ";
@@ -91,18 +91,23 @@ LocalProblem TopoReplanner::localProblem(const EsdfMap& map, const ReplanRequest
   lp.start = start.position;
   lp.start_time_s = t0;
 
+  // Start and goal must satisfy both the optimiser's check (interpolated distance) and the guide
+  // search's (voxel-centre distance at its clearance), or the search could not start or end there.
+  const VisibilityChecker search_free(map, std::max(config_.search.clearance_m, config_.astar.clearance_m),
+                                      config_.search.unknown_is_free);
   const DistanceQuery at_start = map.query(start.position);
   if (at_start.status == QueryStatus::kOutOfMap || at_start.status == QueryStatus::kInvalidInput)
     return fail(ReplanStatus::kInvalidInput, "the start is outside the map");
-  if (at_start.distance < config_.optimizer.clearance_m)
+  if (at_start.distance < config_.optimizer.clearance_m || !search_free.isFree(start.position))
     return fail(ReplanStatus::kStartInCollision, "the start is closer than the clearance to an obstacle");
 
   // The reference within the horizon: where does it first collide, where does the horizon end.
   const double dt = config_.reference_sample_s, T = ref.duration();
   auto collides = [&](double t) {
-    const DistanceQuery q = map.query(ref.position(t));
+    const Eigen::Vector3d p = ref.position(t);
+    const DistanceQuery q = map.query(p);
     return q.status == QueryStatus::kOutOfMap || q.status == QueryStatus::kInvalidInput ||
-           q.distance < config_.reference_clearance_m;
+           q.distance < config_.reference_clearance_m || !search_free.isFree(p);
   };
   double arc = 0.0, t_h = t0;
   Eigen::Vector3d previous = start.position;
@@ -157,12 +162,12 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
   auto fail = [&](ReplanStatus status, const std::string& message) {
     result.status = status;
     result.message = message;
+    // Every failure names a fallback: keep the reference while it is free for a while, else stop.
+    result.fallback = ReplanFallback::kStop;
     if (status != ReplanStatus::kInvalidInput && status != ReplanStatus::kStartInCollision) {
       const double free_until = lp.collision_time_s >= 0.0 ? lp.collision_time_s : lp.horizon_end_time_s;
       result.safe_prefix_s = std::max(0.0, free_until - lp.start_time_s);
-      result.fallback = result.safe_prefix_s > 0.5 ? ReplanFallback::kKeepReference : ReplanFallback::kStop;
-    } else if (status == ReplanStatus::kStartInCollision) {
-      result.fallback = ReplanFallback::kStop;
+      if (result.safe_prefix_s > 0.5) result.fallback = ReplanFallback::kKeepReference;
     }
     result.stats.total_ms = msSince(t_begin);
     return result;

@@ -3,39 +3,11 @@
 
 #include <memory>
 
+#include "plan_env/synthetic_scene.h"
 #include "topo_replan/topo_replanner.h"
 
 namespace topo_planner {
 namespace {
-
-struct Scene {
-  std::shared_ptr<OccupancyMap> occ;
-  std::unique_ptr<EsdfMap> esdf;
-  explicit Scene(const Eigen::Vector3d& size) {
-    OccupancyMap::Config c;
-    c.size_m = size;
-    c.origin_m = Eigen::Vector3d::Zero();
-    std::string err;
-    occ = std::shared_ptr<OccupancyMap>(OccupancyMap::create(c, &err));
-    fill([](const Eigen::Vector3d&) { return true; }, VoxelState::kFree);
-  }
-  template <typename F>
-  void fill(F&& inside, VoxelState s = VoxelState::kOccupied) {
-    const GridGeometry& g = occ->geometry();
-    const VoxelBox w = g.windowBox();
-    Eigen::Vector3i i;
-    for (i.z() = w.min.z(); i.z() <= w.max.z(); ++i.z())
-      for (i.y() = w.min.y(); i.y() <= w.max.y(); ++i.y())
-        for (i.x() = w.min.x(); i.x() <= w.max.x(); ++i.x())
-          if (inside(g.centerOf(i))) occ->setState(i, s);
-  }
-  const EsdfMap& finish() {
-    std::string err;
-    esdf = EsdfMap::create(EsdfMap::Config(), occ, &err);
-    esdf->updateAll();
-    return *esdf;
-  }
-};
 
 FlatState at(const Eigen::Vector3d& p) {
   FlatState s;
@@ -68,7 +40,7 @@ double yAtX(const UniformBspline& s, double x0) {
 }
 
 TEST(TopoReplanner, PillarAcrossTheReference) {
-  Scene scene({12.0, 8.0, 3.0});
+  SyntheticScene scene({12.0, 8.0, 3.0});
   scene.fill([](const Eigen::Vector3d& p) { return std::hypot(p.x() - 6.0, p.y() - 4.0) <= 0.6; });
   const EsdfMap& map = scene.finish();
   const PolynomialTrajectory ref = straightReference({1, 4, 1.5}, {11, 4, 1.5});
@@ -107,7 +79,7 @@ TEST(TopoReplanner, PillarAcrossTheReference) {
 }
 
 TEST(TopoReplanner, FreeReferenceIsKeptWithoutSearching) {
-  Scene scene({12.0, 8.0, 3.0});
+  SyntheticScene scene({12.0, 8.0, 3.0});
   const EsdfMap& map = scene.finish();
   const PolynomialTrajectory ref = straightReference({1, 4, 1.5}, {11, 4, 1.5});
   std::string err;
@@ -130,7 +102,7 @@ TEST(TopoReplanner, FreeReferenceIsKeptWithoutSearching) {
 }
 
 TEST(TopoReplanner, BadInputsGetTheirStatus) {
-  Scene scene({12.0, 8.0, 3.0});
+  SyntheticScene scene({12.0, 8.0, 3.0});
   scene.fill([](const Eigen::Vector3d& p) { return std::hypot(p.x() - 6.0, p.y() - 4.0) <= 0.6; });
   scene.fill([](const Eigen::Vector3d& p) { return p.x() > 10.5 && p.x() < 11.5; });  // a wall at the end
   const EsdfMap& map = scene.finish();
@@ -170,7 +142,7 @@ TEST(TopoReplanner, BadInputsGetTheirStatus) {
 }
 
 TEST(TopoReplanner, PoolGivesTheSameResultAsOneWorker) {
-  Scene scene({12.0, 8.0, 3.0});
+  SyntheticScene scene({12.0, 8.0, 3.0});
   scene.fill([](const Eigen::Vector3d& p) { return std::hypot(p.x() - 6.0, p.y() - 4.0) <= 0.6; });
   scene.fill([](const Eigen::Vector3d& p) { return std::hypot(p.x() - 4.0, p.y() - 2.5) <= 0.4; });
   scene.fill([](const Eigen::Vector3d& p) { return std::hypot(p.x() - 8.0, p.y() - 5.5) <= 0.4; });

@@ -1,5 +1,7 @@
 #include "uav_sim/depth_camera.h"
 
+#include "plan_env/raycast.h"
+
 #include <algorithm>
 #include <cmath>
 
@@ -25,21 +27,8 @@ double DepthCamera::castRay(const Eigen::Vector3d& o, const Eigen::Vector3d& u) 
         if (std::abs(u[k]) > 1e-12) t_enter = std::max(t_enter, std::min((lo[k] - o[k]) / u[k], (hi[k] - o[k]) / u[k]));
       return t_enter <= max_t ? t_enter : INFINITY;
     }
-    double next = t;
-    const double rho = double(d) - half_diagonal;
-    if (rho > 0.0) {
-      const Eigen::Vector3d w = p - g.centerOf(v);
-      const double wu = w.dot(u), ww = w.squaredNorm(), disc = wu * wu - (ww - rho * rho);
-      if (ww < rho * rho && disc >= 0.0) next = t + (-wu + std::sqrt(disc));
-    }
-    if (next <= t + nudge) {  // step into the next voxel along the ray
-      double step = INFINITY;
-      for (int k = 0; k < 3; ++k) {
-        if (u[k] > 0.0) step = std::min(step, ((v[k] + 1) * res - p[k]) / u[k]);
-        if (u[k] < 0.0) step = std::min(step, (v[k] * res - p[k]) / u[k]);
-      }
-      next = t + std::max(step, 0.0) + nudge;
-    }
+    double next = t + distanceToBallExit(p, u, g.centerOf(v), double(d) - half_diagonal);
+    if (next <= t + nudge) next = t + distanceToVoxelExit(p, u, v, res) + nudge;  // into the next voxel
     t = next;
   }
   return INFINITY;

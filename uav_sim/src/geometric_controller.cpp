@@ -26,8 +26,8 @@ bool GeometricController::Config::validate(std::string* why) const {
       break;
     }
   if (!(max_tilt_rad > 0.0 && max_tilt_rad < M_PI / 2)) err << "max_tilt_rad must be in (0, pi/2); ";
-  if (!(min_thrust_ratio >= 0.0 && max_thrust_ratio > 1.0 && min_thrust_ratio < 1.0))
-    err << "need 0 <= min_thrust_ratio < 1 < max_thrust_ratio; ";
+  if (!(min_thrust_ratio > 0.0 && max_thrust_ratio > 1.0 && min_thrust_ratio < 1.0))
+    err << "need 0 < min_thrust_ratio < 1 < max_thrust_ratio (a zero thrust vector has no direction); ";
   const std::string s = err.str();
   if (why) *why = s.empty() ? "" : s.substr(0, s.size() - 2);
   return s.empty();

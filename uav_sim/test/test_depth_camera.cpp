@@ -3,39 +3,11 @@
 #include <memory>
 
 #include "plan_env/map_generator.h"
+#include "plan_env/synthetic_scene.h"
 #include "uav_sim/depth_camera.h"
 
 namespace topo_planner {
 namespace {
-
-struct World {
-  std::shared_ptr<OccupancyMap> occ;
-  std::unique_ptr<EsdfMap> esdf;
-  World(const Eigen::Vector3d& size, const Eigen::Vector3d& origin) {
-    OccupancyMap::Config c;
-    c.size_m = size;
-    c.origin_m = origin;
-    std::string err;
-    occ = std::shared_ptr<OccupancyMap>(OccupancyMap::create(c, &err));
-  }
-  void box(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) {
-    const GridGeometry& g = occ->geometry();
-    const VoxelBox w = g.windowBox();
-    Eigen::Vector3i i;
-    for (i.z() = w.min.z(); i.z() <= w.max.z(); ++i.z())
-      for (i.y() = w.min.y(); i.y() <= w.max.y(); ++i.y())
-        for (i.x() = w.min.x(); i.x() <= w.max.x(); ++i.x()) {
-          const Eigen::Vector3d p = g.centerOf(i);
-          if ((p.array() >= lo.array()).all() && (p.array() <= hi.array()).all()) occ->setState(i, VoxelState::kOccupied);
-        }
-  }
-  const EsdfMap& finish() {
-    std::string err;
-    esdf = EsdfMap::create(EsdfMap::Config(), occ, &err);
-    esdf->updateAll();
-    return *esdf;
-  }
-};
 
 Eigen::Isometry3d lookingAlongX(const Eigen::Vector3d& p) {
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
@@ -55,7 +27,7 @@ DepthCamera::Config smallCamera() {
 }
 
 TEST(DepthCamera, BoxAtTheRightDepthWithOcclusion) {
-  World w({8.0, 6.0, 3.0}, {-1.0, -3.0, 0.0});
+  SyntheticScene w({8.0, 6.0, 3.0}, 0.1, {-1.0, -3.0, 0.0});
   // Bounds 1 cm beyond the voxel centres they mean to include (centres lie on a 0.1 m grid).
   w.box({2.04, -0.46, 0.54}, {2.66, 0.46, 1.46});   // near box, 1 m x 1 m face at x = 2.0
   w.box({4.04, -1.96, 0.04}, {4.36, 1.96, 2.96});   // a wall behind it: face at x = 4.0
@@ -79,8 +51,8 @@ TEST(DepthCamera, BoxAtTheRightDepthWithOcclusion) {
 }
 
 TEST(DepthCamera, AgreesWithAFineRayMarchInAForest) {
-  World w({10.0, 10.0, 3.0}, {0.0, 0.0, 0.0});
-  generateForest(ForestConfig::preset(ObstacleDensity::kHigh), 3, w.occ.get());
+  SyntheticScene w({10.0, 10.0, 3.0}, 0.1, {0.0, 0.0, 0.0});
+  generateForest(ForestConfig::preset(ObstacleDensity::kHigh), 3, w.occupancy.get());
   const EsdfMap& map = w.finish();
   DepthCamera::Config c = smallCamera();
   DepthCamera cam(c, map);
@@ -95,7 +67,7 @@ TEST(DepthCamera, AgreesWithAFineRayMarchInAForest) {
       const Eigen::Vector3d dir = T.linear() * ray.normalized();
       double expected = INFINITY;
       for (double t = 0.0; t <= c.max_range_m; t += 0.002) {
-        const VoxelState s = w.occ->state(Eigen::Vector3d(T.translation() + dir * t));
+        const VoxelState s = w.occupancy->state(Eigen::Vector3d(T.translation() + dir * t));
         if (s == VoxelState::kOutOfMap) break;
         if (s == VoxelState::kOccupied) {
           expected = t / ray.norm();
@@ -112,7 +84,7 @@ TEST(DepthCamera, AgreesWithAFineRayMarchInAForest) {
 }
 
 TEST(DepthCamera, RangeLimitsNoiseAndMillimetres) {
-  World w({8.0, 6.0, 3.0}, {-1.0, -3.0, 0.0});
+  SyntheticScene w({8.0, 6.0, 3.0}, 0.1, {-1.0, -3.0, 0.0});
   w.box({0.04, -2.96, 0.04}, {0.16, 2.96, 2.96});  // a wall whose face is at x = 0
   DepthCamera::Config c = smallCamera();
   c.min_range_m = 0.1;

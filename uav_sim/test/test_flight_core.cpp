@@ -136,6 +136,15 @@ TEST(GeometricController, TiltAndThrustAreLimited) {
   GeometricController::Config bad;
   bad.max_tilt_rad = 2.0;
   EXPECT_FALSE(bad.validate(&why));
+  bad = GeometricController::Config();
+  bad.min_thrust_ratio = 0.0;
+  EXPECT_FALSE(bad.validate(&why));
+  // A command far below: the thrust vector is clamped to the minimum, still vertical and finite.
+  PositionCommand below;
+  below.position = {0.0, 0.0, -100.0};
+  const GeometricController::Output low = sim.ctrl.compute(sim.quad.state(), below);
+  EXPECT_TRUE(low.rotor_speed.allFinite() && low.moment.allFinite());
+  EXPECT_NEAR(low.desired_attitude.col(2).z(), 1.0, 1e-9);
   Quadrotor::Config weak;
   weak.max_rotor_speed_radps = 100.0;
   EXPECT_FALSE(weak.validate(&why));

@@ -23,15 +23,9 @@ double smoothnessCost(const Eigen::MatrixX3d& q, int first, int last, double wei
 double guideCost(const Eigen::MatrixX3d& q, const Eigen::MatrixX3d& guide, int first, int last, double weight,
                  Eigen::MatrixX3d* grad);
 
-/// The trilinear ESDF distance and gradient of EsdfMap::query (same voxels, same polynomial, same
-/// values), without its unknown-voxel flag: the 8 occupancy reads behind that flag are most of a
-/// query's time, and the collision cost uses the values of unknown voxels anyway. False where
-/// query() says kOutOfMap or kInvalidInput.
-bool interpolateDistance(const EsdfMap& map, const Eigen::Vector3d& point, double* distance,
-                         Eigen::Vector3d* gradient);
 
 /// Collision cost on the free control points: sum of (d0 - d(Q_i))^2 over the points whose ESDF
-/// distance d (trilinear, interpolateDistance) is below d0; zero beyond d0, C1 at d0 [m^2]. Points
+/// distance d (trilinear, EsdfMap::interpolate) is below d0; zero beyond d0, C1 at d0 [m^2]. Points
 /// outside the map (or NaN) contribute nothing here; the final check reports them.
 double collisionCost(const Eigen::MatrixX3d& q, int first, int last, const EsdfMap& map, double d0_m, double weight,
                      Eigen::MatrixX3d* grad);

@@ -1,7 +1,10 @@
 #pragma once
 // Collision checks of points and segments against the ESDF at map resolution: a voxel is free when
 // its centre is at least clearance_m from every obstacle (and it is known, unless unknown space
-// counts as free). Segments are walked voxel by voxel with the 3-D DDA, so no voxel is skipped.
+// counts as free). A segment is visible when every voxel it passes through is free. With unknown
+// space free, segments are sphere-traced on the distance field (voxels inside a ball that the field
+// proves free are not read; same answer as reading them, tested against a plain DDA); otherwise the
+// 3-D DDA reads every voxel for its state.
 
 #include <Eigen/Core>
 

@@ -84,6 +84,10 @@ class EsdfMap {
   /// Trilinearly interpolated distance and its gradient. kOutOfMap when any of the 8 voxels
   /// around the point is outside the window; kUnknown when one is unknown (values still filled).
   DistanceQuery query(const Eigen::Vector3d& point) const;
+  /// The trilinear distance and gradient of query() without its unknown-voxel check: false when any
+  /// of the 8 voxels is outside the window or the point is not finite. The fast path of the
+  /// optimiser's collision cost.
+  bool interpolate(const Eigen::Vector3d& point, double* distance, Eigen::Vector3d* gradient) const;
   /// Distance of the nearest voxel centre, without interpolation.
   DistanceQuery nearest(const Eigen::Vector3d& point) const;
 

@@ -11,7 +11,8 @@
 //
 // Storage is a ring buffer over GridGeometry: the window can follow the vehicle (setOriginIndex /
 // recenter) without moving memory. Memory: 8 bytes per voxel (a 40 x 20 x 5 m map at 0.1 m, 4M
-// voxels, takes 32 MB; the ESDF layer adds 4 bytes per voxel).
+// voxels, takes 32 MB); the ESDF layer adds 4 bytes per voxel and, during a full update, 8 bytes
+// per voxel of scratch: 20 bytes per voxel at the peak (80 MB for that map).
 //
 // Thread safety: none inside. One writer at a time, and no reader while it writes; the owner
 // (e.g. the mapping node) serialises them, typically with a std::shared_mutex.
@@ -65,8 +66,9 @@ class OccupancyMap {
     bool validate(std::string* why) const;
   };
 
-  /// Bytes the occupancy and ESDF layers need per voxel (used by the memory check).
-  static constexpr size_t kBytesPerVoxel = 12;
+  /// Peak bytes per voxel of the occupancy and ESDF layers, ESDF update scratch included (used by
+  /// the memory check).
+  static constexpr size_t kBytesPerVoxel = 20;
 
   /// Builds a map; nullptr with a reason for an invalid config or one too large for memory.
   static std::unique_ptr<OccupancyMap> create(const Config& config, std::string* error);

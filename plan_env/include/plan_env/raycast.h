@@ -3,6 +3,7 @@
 // visits every voxel a segment passes through, in order, with no voxel skipped or repeated.
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
@@ -62,6 +63,27 @@ bool traverseVoxels(const Eigen::Vector3d& from, const Eigen::Vector3d& to, doub
     if (!visit(static_cast<const Eigen::Vector3i&>(idx))) return false;
   }
   return true;
+}
+
+/// Distance along the unit direction u from p, which lies in voxel v, to where the ray leaves v.
+inline double distanceToVoxelExit(const Eigen::Vector3d& p, const Eigen::Vector3d& u, const Eigen::Vector3i& v,
+                                  double resolution) {
+  double step = INFINITY;
+  for (int k = 0; k < 3; ++k) {
+    if (u[k] > 0.0) step = std::min(step, ((v[k] + 1) * resolution - p[k]) / u[k]);
+    if (u[k] < 0.0) step = std::min(step, (v[k] * resolution - p[k]) / u[k]);
+  }
+  return std::max(step, 0.0);
+}
+
+/// Distance along the unit direction u from p to where the ray leaves the ball (centre, radius);
+/// 0 when p is not inside it. The step of sphere tracing on a distance field.
+inline double distanceToBallExit(const Eigen::Vector3d& p, const Eigen::Vector3d& u, const Eigen::Vector3d& centre,
+                                 double radius) {
+  if (!(radius > 0.0)) return 0.0;
+  const Eigen::Vector3d w = p - centre;
+  const double wu = w.dot(u), ww = w.squaredNorm(), disc = wu * wu - (ww - radius * radius);
+  return (ww < radius * radius && disc >= 0.0) ? -wu + std::sqrt(disc) : 0.0;
 }
 
 /// Clips the segment from->to to the axis-aligned box [lo, hi]. On success returns true and the

@@ -4,6 +4,7 @@
 
 #include <atomic>
 #include <condition_variable>
+#include <exception>
 #include <functional>
 #include <mutex>
 #include <thread>
@@ -23,7 +24,8 @@ class ThreadPool {
 
   /// Runs fn(task, worker) for every task in [0, num_tasks); worker is in [0, size()) and no two
   /// tasks run on the same worker at once, so per-worker scratch indexed by it needs no lock.
-  /// Concurrent calls on one pool are serialised.
+  /// Concurrent calls on one pool are serialised. If tasks throw, the remaining tasks still run and
+  /// the first exception is rethrown to the caller once all workers are done.
   void parallelFor(int num_tasks, const std::function<void(int task, int worker)>& fn);
 
  private:
@@ -39,6 +41,7 @@ class ThreadPool {
   int num_tasks_ = 0;
   std::atomic<int> next_task_{0};
   int busy_workers_ = 0;
+  std::exception_ptr error_;  // first exception of the current parallelFor
   uint64_t generation_ = 0;
   bool stop_ = false;
 };

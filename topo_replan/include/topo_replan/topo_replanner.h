@@ -32,7 +32,8 @@ namespace topo_planner {
 
 enum class ReplanStatus {
   kSuccess,
-  kStartInCollision,    ///< the current position is closer than the optimiser's clearance to an obstacle
+  kStartInCollision,    ///< the current position is closer than the optimiser's clearance (interpolated)
+                        ///< or the search's clearance (voxel centre) to an obstacle
   kGoalInCollision,     ///< no safe reference point at or past the horizon
   kGoalOutOfMap,        ///< the local goal lies outside the map
   kInvalidInput,        ///< NaN/inf state, empty reference, invalid config
@@ -110,7 +111,7 @@ class TopoReplanner {
     GridAStar::Config astar;              ///< last-resort guide (no topological path, or none passed)
     double horizon_m = 7.0;               ///< length of reference checked and replanned [m]
     double reference_clearance_m = 0.3;   ///< the reference collides where the ESDF is below this [m]
-    double reference_sample_s = 0.01;     ///< time step of the reference check [s]
+    double reference_sample_s = 0.01;     ///< time step of the reference check, at least 1e-4 [s]
     double control_point_spacing_m = 0.35;  ///< initial spline: about one control point per this [m]
     int num_threads = 2;                  ///< optimisation workers, the caller included
     double duration_weight = 0.0;         ///< selection cost weight of the duration [m^2/s^6]

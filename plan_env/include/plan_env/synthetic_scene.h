@@ -1,28 +1,32 @@
 #pragma once
-// Synthetic scenes for the path-search tests: an all-free map with shapes carved in.
+// Synthetic maps for tests, benchmarks and examples: an all-known map (free everywhere) with shapes
+// carved in (cylinders, boxes, any predicate) or a seeded random forest, and its ESDF.
 
+#include <cmath>
 #include <memory>
 #include <string>
 
 #include "plan_env/esdf_map.h"
+#include "plan_env/map_generator.h"
 
 namespace topo_planner {
-namespace test {
 
-struct Scene {
+struct SyntheticScene {
   std::shared_ptr<OccupancyMap> occupancy;
   std::unique_ptr<EsdfMap> esdf;
 
-  /// An all-free map of the given size (lower corner at the origin).
-  explicit Scene(const Eigen::Vector3d& size_m, double resolution = 0.1) {
+  /// An all-free map of the given size with its lower corner at origin_m.
+  explicit SyntheticScene(const Eigen::Vector3d& size_m, double resolution = 0.1,
+                          const Eigen::Vector3d& origin_m = Eigen::Vector3d::Zero()) {
     OccupancyMap::Config c;
     c.resolution_m = resolution;
     c.size_m = size_m;
-    c.origin_m = Eigen::Vector3d::Zero();
+    c.origin_m = origin_m;
     std::string err;
     occupancy = std::shared_ptr<OccupancyMap>(OccupancyMap::create(c, &err));
     fill([](const Eigen::Vector3d&) { return true; }, VoxelState::kFree);
   }
+  /// Sets every voxel whose centre satisfies inside(centre) to state.
   template <typename Inside>
   void fill(Inside&& inside, VoxelState state = VoxelState::kOccupied) {
     const GridGeometry& g = occupancy->geometry();
@@ -33,13 +37,17 @@ struct Scene {
         for (i.x() = w.min.x(); i.x() <= w.max.x(); ++i.x())
           if (inside(g.centerOf(i))) occupancy->setState(i, state);
   }
+  /// A vertical cylinder through the whole map height.
   void pillar(double x, double y, double radius) {
     fill([=](const Eigen::Vector3d& p) { return std::hypot(p.x() - x, p.y() - y) <= radius; });
   }
+  /// The voxels whose centres lie in [lo, hi].
   void box(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) {
     fill([=](const Eigen::Vector3d& p) { return (p.array() >= lo.array()).all() && (p.array() <= hi.array()).all(); });
   }
-  /// Call after carving: computes the ESDF.
+  /// A seeded random forest (map_generator.h) over the whole window.
+  void forest(ObstacleDensity density, uint32_t seed) { generateForest(ForestConfig::preset(density), seed, occupancy.get()); }
+  /// Call after carving: computes the ESDF (2 m truncation).
   const EsdfMap& finish() {
     EsdfMap::Config c;
     c.max_distance_m = 2.0;
@@ -50,5 +58,4 @@ struct Scene {
   }
 };
 
-}  // namespace test
 }  // namespace topo_planner
