@@ -16,6 +16,7 @@
 #include <random>
 #include <string>
 
+#include "plan_env/timing.h"
 #include "bspline_opt/path_guided_optimizer.h"
 #include "path_searching/grid_astar.h"
 #include "path_searching/path_shortener.h"
@@ -26,12 +27,6 @@ using namespace topo_planner;
 namespace {
 
 constexpr double kMaxVel = 3.0, kMaxAcc = 2.5, kClearance = 0.25, kGuideClearance = 0.4;
-
-double percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  return v[std::min(v.size() - 1, size_t(q * double(v.size() - 1) + 0.5))];
-}
 
 UniformBspline reference(const Eigen::Vector3d& start, const Eigen::Vector3d& goal) {
   const int n = std::clamp(int(std::lround((goal - start).norm() / 0.3)) + 5, 20, 40);

@@ -11,21 +11,13 @@
 #include <random>
 #include <string>
 
+#include "plan_env/timing.h"
 #include "path_searching/topo_path_search.h"
 #include "plan_env/map_generator.h"
 
 using namespace topo_planner;
 
 namespace {
-
-double nowMs() {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-double percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  return v[std::min(v.size() - 1, size_t(q * double(v.size() - 1) + 0.5))];
-}
 
 struct Task {
   Eigen::Vector3d start, goal;

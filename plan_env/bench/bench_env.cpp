@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "plan_env/timing.h"
 #include "../tools/voxel_depth_renderer.h"
 #include "plan_env/esdf_map.h"
 #include "plan_env/map_io.h"
@@ -20,18 +21,10 @@ using namespace topo_planner;
 
 namespace {
 
-double nowMs() {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
 struct Stats {
   double median, p95, min;
 };
-Stats summarize(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  auto at = [&](double q) { return v[std::min(v.size() - 1, size_t(q * double(v.size() - 1) + 0.5))]; };
-  return {at(0.5), at(0.95), v.front()};
-}
+Stats summarize(const std::vector<double>& v) { return {percentile(v, 0.5), percentile(v, 0.95), percentile(v, 0.0)}; }
 
 void row(const char* name, const char* what, const std::vector<double>& samples) {
   const Stats s = summarize(samples);

@@ -11,21 +11,12 @@
 #include <cstring>
 #include <string>
 
+#include "plan_env/timing.h"
 #include "plan_env/esdf_map.h"
 #include "plan_env/map_io.h"
 #include "voxel_depth_renderer.h"
 
 using namespace topo_planner;
-
-namespace {
-double nowMs() {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-double percentile(std::vector<double> v, double q) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[std::min(v.size() - 1, size_t(q * double(v.size() - 1) + 0.5))];
-}
-}  // namespace
 
 int main(int argc, char** argv) {
   std::string map_path, out_dir = "results";

@@ -13,17 +13,13 @@
 #include <iomanip>
 #include <sstream>
 
+#include "plan_env/timing.h"
 #include "plan_env/map_io.h"
 #include "replan_suite.h"
 
 using namespace topo_planner;
 
 namespace {
-double percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  return v[std::min(v.size() - 1, size_t(q * double(v.size() - 1) + 0.5))];
-}
 int usage() {
   std::fprintf(stderr,
                "usage: bench_replan --map FILE.bt|FILE.pcd --tasks TASKS.csv --out DIR [--method "

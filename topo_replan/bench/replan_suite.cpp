@@ -1,3 +1,4 @@
+#include "plan_env/timing.h"
 #include "replan_suite.h"
 
 #include <algorithm>
@@ -20,12 +21,6 @@ namespace {
 
 double msSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
-
-double percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  return v[std::min(v.size() - 1, size_t(q * double(v.size() - 1) + 0.5))];
 }
 
 FlatState rest(const Eigen::Vector3d& p) {
