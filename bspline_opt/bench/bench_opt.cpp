@@ -16,6 +16,7 @@
 #include <random>
 #include <string>
 
+#include "plan_env/synthetic_scene.h"
 #include "plan_env/timing.h"
 #include "bspline_opt/path_guided_optimizer.h"
 #include "path_searching/grid_astar.h"
@@ -124,16 +125,11 @@ int main(int argc, char** argv) {
 
   int tasks = 0, no_guide = 0, control_points_min = 1000, control_points_max = 0;
   for (int m = 0; m < maps; ++m) {
-    OccupancyMap::Config oc;
-    oc.size_m = {20.0, 20.0, 3.0};
-    oc.origin_m = {0.0, 0.0, 0.0};
-    std::string err;
-    auto occ = std::shared_ptr<OccupancyMap>(OccupancyMap::create(oc, &err));
+    SyntheticScene scene({20.0, 20.0, 3.0});
     const uint32_t map_seed = 4000u + uint32_t(m);
-    generateForest(ForestConfig::preset(ObstacleDensity::kMedium), map_seed, occ.get());
-    auto esdf = EsdfMap::create(EsdfMap::Config(), occ, &err);
-    esdf->updateAll();
-    const VisibilityChecker roomy(*esdf, 0.6, true), guide_checker(*esdf, kGuideClearance, true);
+    scene.forest(ObstacleDensity::kMedium, map_seed);
+    const EsdfMap& map = scene.finish();
+    const VisibilityChecker roomy(map, 0.6, true), guide_checker(map, kGuideClearance, true);
     const PathShortener shortener(guide_checker);
     GridAStar::Config ac;
     ac.clearance_m = kGuideClearance;
@@ -146,8 +142,8 @@ int main(int argc, char** argv) {
       const double d = (goal - start).norm();
       if (d < 5.0 || d > 9.0 || !roomy.isFree(start) || !roomy.isFree(goal)) continue;
       const UniformBspline initial = reference(start, goal);
-      if (!crossesObstacle(initial, *esdf)) continue;
-      const GridAStar::Result a = astar.search(*esdf, start, goal);
+      if (!crossesObstacle(initial, map)) continue;
+      const GridAStar::Result a = astar.search(map, start, goal);
       ++made;
       if (a.status != SearchStatus::kSuccess) {
         ++no_guide;
@@ -163,9 +159,9 @@ int main(int argc, char** argv) {
         const PathGuidedOptimizer optimizer(c);
         OptimizationResult r;
         switch (method.kind) {
-          case Method::kPgo: r = optimizer.optimize(initial, guide, *esdf); break;
-          case Method::kGto: r = optimizer.gto(initial, *esdf); break;
-          case Method::kGtoRestarts: r = optimizer.gtoWithRestarts(initial, *esdf, restarts, uint32_t(tasks)); break;
+          case Method::kPgo: r = optimizer.optimize(initial, guide, map); break;
+          case Method::kGto: r = optimizer.gto(initial, map); break;
+          case Method::kGtoRestarts: r = optimizer.gtoWithRestarts(initial, map, restarts, uint32_t(tasks)); break;
         }
         ++method.tasks;
         ++method.statuses[r.status];

@@ -11,6 +11,7 @@
 #include <random>
 #include <string>
 
+#include "plan_env/synthetic_scene.h"
 #include "plan_env/timing.h"
 #include "path_searching/topo_path_search.h"
 #include "plan_env/map_generator.h"
@@ -131,17 +132,12 @@ int main(int argc, char** argv) {
     double paths = 0.0, prm_distinct = 0.0, topo_distinct_on_prm_tasks = 0.0, topo_ms_on_prm_tasks = 0.0;
     int found = 0, tasks = 0, prm_done = 0;
     for (int m = 0; m < maps; ++m) {
-      OccupancyMap::Config oc;
-      oc.size_m = {20.0, 20.0, 3.0};
-      oc.origin_m = {0.0, 0.0, 0.0};
-      std::string err;
-      auto occ = std::shared_ptr<OccupancyMap>(OccupancyMap::create(oc, &err));
+      SyntheticScene scene({20.0, 20.0, 3.0});
       const uint32_t map_seed = 1000u * uint32_t(density) + uint32_t(m);
-      generateForest(ForestConfig::preset(density), map_seed, occ.get());
-      auto esdf = EsdfMap::create(EsdfMap::Config(), occ, &err);
-      esdf->updateAll();
-      const VisibilityChecker checker(*esdf, clearance, true);
-      const VisibilityChecker roomy(*esdf, clearance + 0.2, true);
+      scene.forest(density, map_seed);
+      const EsdfMap& map = scene.finish();
+      const VisibilityChecker checker(map, clearance, true);
+      const VisibilityChecker roomy(map, clearance + 0.2, true);
       std::mt19937 rng(map_seed * 7919u + 13u);
       std::uniform_real_distribution<double> ux(1.5, 18.5), uz(1.0, 2.0);
       int made = 0;
@@ -158,7 +154,7 @@ int main(int argc, char** argv) {
         c.roadmap.max_unproductive_samples = unproductive;
         c.seed = uint32_t(tasks);
         TopoPathSearch search(c);
-        const TopoSearchResult r = search.search(*esdf, t.start, t.goal);
+        const TopoSearchResult r = search.search(map, t.start, t.goal);
         found += r.status == SearchStatus::kSuccess;
         paths += double(r.paths.size());
         total.push_back(r.stats.total_ms);
@@ -167,7 +163,7 @@ int main(int argc, char** argv) {
         shorten.push_back(r.stats.shortening_ms);
         prune.push_back(r.stats.pruning_ms);
         if (prm_done < prm_tasks * (m + 1) / maps) {
-          const PrmResult p = plainPrm(*esdf, t, samples, clearance, uint32_t(tasks));
+          const PrmResult p = plainPrm(map, t, samples, clearance, uint32_t(tasks));
           prm_ms.push_back(p.ms);
           prm_distinct += p.distinct;
           topo_distinct_on_prm_tasks += r.stats.distinct_paths;

@@ -77,13 +77,7 @@ int main(int argc, char** argv) {
   }
   summary << "trial,map_id,ok,topo_ms,opt_ms,total_ms,num_paths\n" << std::fixed << std::setprecision(4);
 
-  const TopoReplanner::Config rc = bench::benchmarkReplannerConfig(suite);
-  auto replanner = TopoReplanner::create(rc, &err);
-  const PathGuidedOptimizer optimizer(rc.optimizer);
-  GridAStar astar(rc.astar);
-  ReferenceConfig ref_config;
-  ref_config.max_vel_mps = suite.max_vel_mps;
-  ref_config.max_acc_mps2 = suite.max_acc_mps2;
+  bench::MethodRunner runner(suite);
 
   std::vector<double> total_ms, jerk;
   int tasks_run = 0, solved = 0, bad_rows = 0;
@@ -99,13 +93,10 @@ int main(int argc, char** argv) {
       continue;
     }
     if (map_id >= 0 && id != map_id) continue;
-    FlatState a, b;
-    a.position = s;
-    b.position = g;
     PolynomialTrajectory reference;
     bench::TaskOutcome o;
-    if (referenceTrajectory({s, g}, a, b, ref_config, &reference) == TrajectoryStatus::kSuccess)
-      o = bench::runMethod(method, *replanner, optimizer, astar, *esdf, reference, suite.gto_restarts, uint32_t(trial));
+    if (referenceTrajectory({s, g}, FlatState::atRest(s), FlatState::atRest(g), runner.reference, &reference) == TrajectoryStatus::kSuccess)
+      o = runner.run(method, *esdf, reference, uint32_t(trial));
     ++tasks_run;
     summary << trial << "," << id << "," << int(o.ok) << "," << o.search_ms << "," << o.opt_ms << "," << o.total_ms << ","
             << o.paths << "\n";

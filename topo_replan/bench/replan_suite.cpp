@@ -1,4 +1,3 @@
-#include "plan_env/timing.h"
 #include "replan_suite.h"
 
 #include <algorithm>
@@ -13,6 +12,8 @@
 
 #include "path_searching/path_shortener.h"
 #include "plan_env/map_generator.h"
+#include "plan_env/synthetic_scene.h"
+#include "plan_env/timing.h"
 
 namespace topo_planner {
 namespace bench {
@@ -21,12 +22,6 @@ namespace {
 
 double msSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
-
-FlatState rest(const Eigen::Vector3d& p) {
-  FlatState s;
-  s.position = p;
-  return s;
 }
 
 }  // namespace
@@ -132,35 +127,38 @@ TaskOutcome runMethod(Method method, TopoReplanner& replanner, const PathGuidedO
   return out;
 }
 
+MethodRunner::MethodRunner(const SuiteConfig& suite)
+    : config(benchmarkReplannerConfig(suite)),
+      replanner(TopoReplanner::create(config, nullptr)),
+      optimizer(config.optimizer),
+      astar(config.astar),
+      restarts(suite.gto_restarts) {
+  reference.max_vel_mps = suite.max_vel_mps;
+  reference.max_acc_mps2 = suite.max_acc_mps2;
+}
+
+TaskOutcome MethodRunner::run(Method method, const EsdfMap& map, const PolynomialTrajectory& ref, uint32_t seed) {
+  return runMethod(method, *replanner, optimizer, astar, map, ref, restarts, seed);
+}
+
 std::vector<TaskOutcome> runSuite(const SuiteConfig& config, const std::vector<ObstacleDensity>& densities) {
   std::vector<TaskOutcome> outcomes;
-  const TopoReplanner::Config rc = benchmarkReplannerConfig(config);
-  std::string err;
-  auto replanner = TopoReplanner::create(rc, &err);
-  const PathGuidedOptimizer optimizer(rc.optimizer);
-  GridAStar astar(rc.astar);
-  ReferenceConfig ref_config;
-  ref_config.max_vel_mps = config.max_vel_mps;
-  ref_config.max_acc_mps2 = config.max_acc_mps2;
+  MethodRunner runner(config);
   const int total = int(densities.size()) * config.maps_per_density * config.tasks_per_map;
   int done = 0;
   for (ObstacleDensity density : densities) {
     int trial = 0;
     for (int m = 0; m < config.maps_per_density; ++m) {
-      OccupancyMap::Config oc;
-      oc.size_m = config.map_size_m;
-      oc.origin_m = Eigen::Vector3d::Zero();
-      auto occ = std::shared_ptr<OccupancyMap>(OccupancyMap::create(oc, &err));
+      SyntheticScene scene(config.map_size_m);
       const uint32_t map_seed = 1000u * uint32_t(density) + uint32_t(m);
-      generateForest(ForestConfig::preset(density), map_seed, occ.get());
-      auto esdf = EsdfMap::create(EsdfMap::Config(), occ, &err);
-      esdf->updateAll();
-      const VisibilityChecker line(*esdf, rc.search.clearance_m, true);
+      scene.forest(density, map_seed);
+      const EsdfMap& map = scene.finish();
+      const VisibilityChecker line(map, runner.config.search.clearance_m, true);
       std::mt19937 rng(map_seed * 7919u + 13u);
       std::uniform_real_distribution<double> ux(1.5, config.map_size_m.x() - 1.5), uy(1.5, config.map_size_m.y() - 1.5),
           uz(1.0, std::min(2.0, config.map_size_m.z() - 1.0));
       auto roomy = [&](const Eigen::Vector3d& p) {
-        const DistanceQuery q = esdf->query(p);
+        const DistanceQuery q = map.query(p);
         return q.status == QueryStatus::kOk && q.distance >= config.task_clearance_m;
       };
       for (int k = 0; k < config.tasks_per_map;) {
@@ -169,11 +167,10 @@ std::vector<TaskOutcome> runSuite(const SuiteConfig& config, const std::vector<O
         if (d < config.min_task_length_m || d > config.max_task_length_m || !roomy(s) || !roomy(g) || line.lineVisible(s, g))
           continue;
         PolynomialTrajectory reference;
-        if (referenceTrajectory({s, g}, rest(s), rest(g), ref_config, &reference) != TrajectoryStatus::kSuccess) continue;
+        if (referenceTrajectory({s, g}, FlatState::atRest(s), FlatState::atRest(g), runner.reference, &reference) != TrajectoryStatus::kSuccess) continue;
         ++k;
         for (Method method : allMethods()) {
-          TaskOutcome o = runMethod(method, *replanner, optimizer, astar, *esdf, reference, config.gto_restarts,
-                                    uint32_t(trial) * 31u + 7u);
+          TaskOutcome o = runner.run(method, map, reference, uint32_t(trial) * 31u + 7u);
           o.density = toString(density);
           o.trial = trial;
           o.trajectory = UniformBspline();  // not kept: the suite only reports

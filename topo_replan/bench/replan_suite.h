@@ -58,6 +58,19 @@ TopoReplanner::Config benchmarkReplannerConfig(const SuiteConfig& suite);
 TaskOutcome runMethod(Method method, TopoReplanner& replanner, const PathGuidedOptimizer& optimizer, GridAStar& astar,
                       const EsdfMap& map, const PolynomialTrajectory& reference, int restarts, uint32_t seed);
 
+/// The replanner, optimiser, A* and reference limits shared by every method of a run.
+struct MethodRunner {
+  explicit MethodRunner(const SuiteConfig& suite);
+  TaskOutcome run(Method method, const EsdfMap& map, const PolynomialTrajectory& reference, uint32_t seed);
+
+  TopoReplanner::Config config;
+  std::unique_ptr<TopoReplanner> replanner;
+  PathGuidedOptimizer optimizer;
+  GridAStar astar;
+  ReferenceConfig reference;
+  int restarts;
+};
+
 /// Runs the suite: every method on every task of every density. Progress on stderr.
 std::vector<TaskOutcome> runSuite(const SuiteConfig& config, const std::vector<ObstacleDensity>& densities);
 

@@ -55,10 +55,6 @@ Mat8 segmentCost(double T) {
   return std::pow(T, -7.0) * s_inv.asDiagonal() * core * s_inv.asDiagonal();
 }
 
-bool finiteState(const FlatState& s) {
-  return s.position.allFinite() && s.velocity.allFinite() && s.acceleration.allFinite() && s.jerk.allFinite();
-}
-
 }  // namespace
 
 const char* toString(TrajectoryStatus status) {
@@ -126,7 +122,7 @@ TrajectoryStatus minimumSnapTrajectory(const std::vector<Eigen::Vector3d>& waypo
                                        const std::vector<double>& durations, const FlatState& start,
                                        const FlatState& end, PolynomialTrajectory* out) {
   const int m = int(waypoints.size()) - 1;  // segments
-  if (m < 1 || int(durations.size()) != m || !finiteState(start) || !finiteState(end)) return TrajectoryStatus::kInvalidInput;
+  if (m < 1 || int(durations.size()) != m || !start.allFinite() || !end.allFinite()) return TrajectoryStatus::kInvalidInput;
   for (const auto& w : waypoints)
     if (!w.allFinite()) return TrajectoryStatus::kInvalidInput;
   for (double d : durations)

@@ -15,10 +15,6 @@ double msSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
-bool finiteState(const FlatState& s) {
-  return s.position.allFinite() && s.velocity.allFinite() && s.acceleration.allFinite() && s.jerk.allFinite();
-}
-
 }  // namespace
 
 const char* toString(ReplanStatus status) {
@@ -82,7 +78,7 @@ LocalProblem TopoReplanner::localProblem(const EsdfMap& map, const ReplanRequest
     lp.message = message;
     return lp;
   };
-  if (!request.reference || request.reference->empty() || !finiteState(request.start) ||
+  if (!request.reference || request.reference->empty() || !request.start.allFinite() ||
       !std::isfinite(request.reference_time_s))
     return fail(ReplanStatus::kInvalidInput, "no reference, or a NaN/inf state or time");
   const PolynomialTrajectory& ref = *request.reference;

@@ -5,15 +5,9 @@
 namespace topo_planner {
 namespace {
 
-FlatState at(const Eigen::Vector3d& p) {
-  FlatState s;
-  s.position = p;
-  return s;
-}
-
 TEST(MinimumSnap, SingleRestToRestSegmentIsTheKnownPolynomial) {
   PolynomialTrajectory traj;
-  ASSERT_EQ(minimumSnapTrajectory({{0, 0, 0}, {1, 0, 0}}, {2.0}, at({0, 0, 0}), at({1, 0, 0}), &traj),
+  ASSERT_EQ(minimumSnapTrajectory({{0, 0, 0}, {1, 0, 0}}, {2.0}, FlatState::atRest({0, 0, 0}), FlatState::atRest({1, 0, 0}), &traj),
             TrajectoryStatus::kSuccess);
   for (double tau = 0.0; tau <= 1.0; tau += 0.05) {
     const double expected = 35 * std::pow(tau, 4) - 84 * std::pow(tau, 5) + 70 * std::pow(tau, 6) - 20 * std::pow(tau, 7);
@@ -30,7 +24,7 @@ TEST(MinimumSnap, SingleRestToRestSegmentIsTheKnownPolynomial) {
 TEST(MinimumSnap, ThroughWaypointsWithSmoothJoinsAndGivenEnds) {
   const std::vector<Eigen::Vector3d> w{{0, 0, 1}, {2, 1, 1.5}, {4, -1, 1}, {5, 2, 2}, {8, 2, 1}};
   const std::vector<double> T{1.5, 2.0, 1.2, 2.5};
-  FlatState start = at(w.front()), end = at(w.back());
+  FlatState start = FlatState::atRest(w.front()), end = FlatState::atRest(w.back());
   start.velocity = {1.0, 0.5, 0.0};
   start.acceleration = {0.2, -0.3, 0.1};
   end.velocity = {0.5, 0.0, -0.2};
@@ -61,9 +55,9 @@ TEST(MinimumSnap, OptimumBeatsOtherJoins) {
   // rest-to-rest pieces cost more snap than the joint optimum.
   const std::vector<Eigen::Vector3d> w{{0, 0, 1}, {2, 1, 1}, {4, 0, 1}};
   PolynomialTrajectory joint, first, second;
-  ASSERT_EQ(minimumSnapTrajectory(w, {1.5, 1.5}, at(w[0]), at(w[2]), &joint), TrajectoryStatus::kSuccess);
-  ASSERT_EQ(minimumSnapTrajectory({w[0], w[1]}, {1.5}, at(w[0]), at(w[1]), &first), TrajectoryStatus::kSuccess);
-  ASSERT_EQ(minimumSnapTrajectory({w[1], w[2]}, {1.5}, at(w[1]), at(w[2]), &second), TrajectoryStatus::kSuccess);
+  ASSERT_EQ(minimumSnapTrajectory(w, {1.5, 1.5}, FlatState::atRest(w[0]), FlatState::atRest(w[2]), &joint), TrajectoryStatus::kSuccess);
+  ASSERT_EQ(minimumSnapTrajectory({w[0], w[1]}, {1.5}, FlatState::atRest(w[0]), FlatState::atRest(w[1]), &first), TrajectoryStatus::kSuccess);
+  ASSERT_EQ(minimumSnapTrajectory({w[1], w[2]}, {1.5}, FlatState::atRest(w[1]), FlatState::atRest(w[2]), &second), TrajectoryStatus::kSuccess);
   EXPECT_LT(joint.snapCost(), first.snapCost() + second.snapCost());
 }
 
@@ -74,17 +68,17 @@ TEST(ReferenceTrajectory, RespectsTheLimits) {
     c.max_vel_mps = vmax;
     c.max_acc_mps2 = 2.5;
     PolynomialTrajectory traj;
-    ASSERT_EQ(referenceTrajectory(w, at(w.front()), at(w.back()), c, &traj), TrajectoryStatus::kSuccess);
+    ASSERT_EQ(referenceTrajectory(w, FlatState::atRest(w.front()), FlatState::atRest(w.back()), c, &traj), TrajectoryStatus::kSuccess);
     EXPECT_LE(traj.maxSpeed(), vmax * (1 + 1e-6));
     EXPECT_LE(traj.maxAcceleration(), 2.5 * (1 + 1e-6));
     EXPECT_GT(traj.maxSpeed(), 0.5 * std::min(vmax, 3.0));  // and not needlessly slow
     EXPECT_LT((traj.position(traj.duration()) - w.back()).norm(), 1e-9);
   }
   // A moving start (replanning from flight).
-  FlatState moving = at({0, 0, 1});
+  FlatState moving = FlatState::atRest({0, 0, 1});
   moving.velocity = {2.0, 0.0, 0.0};
   PolynomialTrajectory traj;
-  ASSERT_EQ(referenceTrajectory({{0, 0, 1}, {6, 3, 1}}, moving, at({6, 3, 1}), ReferenceConfig(), &traj),
+  ASSERT_EQ(referenceTrajectory({{0, 0, 1}, {6, 3, 1}}, moving, FlatState::atRest({6, 3, 1}), ReferenceConfig(), &traj),
             TrajectoryStatus::kSuccess);
   EXPECT_TRUE(traj.velocity(0.0).isApprox(moving.velocity, 1e-9));
   EXPECT_LE(traj.maxSpeed(), 3.0 * (1 + 1e-6));
@@ -92,19 +86,19 @@ TEST(ReferenceTrajectory, RespectsTheLimits) {
 
 TEST(ReferenceTrajectory, InvalidInputs) {
   PolynomialTrajectory traj;
-  EXPECT_EQ(minimumSnapTrajectory({{0, 0, 0}}, {}, at({0, 0, 0}), at({0, 0, 0}), &traj), TrajectoryStatus::kInvalidInput);
-  EXPECT_EQ(minimumSnapTrajectory({{0, 0, 0}, {1, 0, 0}}, {0.0}, at({0, 0, 0}), at({1, 0, 0}), &traj),
+  EXPECT_EQ(minimumSnapTrajectory({{0, 0, 0}}, {}, FlatState::atRest({0, 0, 0}), FlatState::atRest({0, 0, 0}), &traj), TrajectoryStatus::kInvalidInput);
+  EXPECT_EQ(minimumSnapTrajectory({{0, 0, 0}, {1, 0, 0}}, {0.0}, FlatState::atRest({0, 0, 0}), FlatState::atRest({1, 0, 0}), &traj),
             TrajectoryStatus::kInvalidInput);
-  EXPECT_EQ(minimumSnapTrajectory({{0, 0, 0}, {1, 0, 0}}, {1.0, 1.0}, at({0, 0, 0}), at({1, 0, 0}), &traj),
+  EXPECT_EQ(minimumSnapTrajectory({{0, 0, 0}, {1, 0, 0}}, {1.0, 1.0}, FlatState::atRest({0, 0, 0}), FlatState::atRest({1, 0, 0}), &traj),
             TrajectoryStatus::kInvalidInput);
-  EXPECT_EQ(minimumSnapTrajectory({{0, 0, 0}, {NAN, 0, 0}}, {1.0}, at({0, 0, 0}), at({1, 0, 0}), &traj),
+  EXPECT_EQ(minimumSnapTrajectory({{0, 0, 0}, {NAN, 0, 0}}, {1.0}, FlatState::atRest({0, 0, 0}), FlatState::atRest({1, 0, 0}), &traj),
             TrajectoryStatus::kInvalidInput);
-  FlatState bad = at({0, 0, 0});
+  FlatState bad = FlatState::atRest({0, 0, 0});
   bad.velocity.x() = INFINITY;
-  EXPECT_EQ(minimumSnapTrajectory({{0, 0, 0}, {1, 0, 0}}, {1.0}, bad, at({1, 0, 0}), &traj), TrajectoryStatus::kInvalidInput);
+  EXPECT_EQ(minimumSnapTrajectory({{0, 0, 0}, {1, 0, 0}}, {1.0}, bad, FlatState::atRest({1, 0, 0}), &traj), TrajectoryStatus::kInvalidInput);
   ReferenceConfig c;
   c.max_vel_mps = 0.0;
-  EXPECT_EQ(referenceTrajectory({{0, 0, 0}, {1, 0, 0}}, at({0, 0, 0}), at({1, 0, 0}), c, &traj), TrajectoryStatus::kInvalidInput);
+  EXPECT_EQ(referenceTrajectory({{0, 0, 0}, {1, 0, 0}}, FlatState::atRest({0, 0, 0}), FlatState::atRest({1, 0, 0}), c, &traj), TrajectoryStatus::kInvalidInput);
   EXPECT_TRUE(PolynomialTrajectory().derivative(1.0, 0).isZero());
 }
 

@@ -9,15 +9,9 @@
 namespace topo_planner {
 namespace {
 
-FlatState at(const Eigen::Vector3d& p) {
-  FlatState s;
-  s.position = p;
-  return s;
-}
-
 PolynomialTrajectory straightReference(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   PolynomialTrajectory ref;
-  EXPECT_EQ(referenceTrajectory({a, b}, at(a), at(b), ReferenceConfig(), &ref), TrajectoryStatus::kSuccess);
+  EXPECT_EQ(referenceTrajectory({a, b}, FlatState::atRest(a), FlatState::atRest(b), ReferenceConfig(), &ref), TrajectoryStatus::kSuccess);
   return ref;
 }
 
@@ -118,7 +112,7 @@ TEST(TopoReplanner, BadInputsGetTheirStatus) {
 
   const PolynomialTrajectory ref = straightReference({1, 4, 1.5}, {9, 4, 1.5});
   req.reference = &ref;
-  req.start = at({6.0, 4.0, 1.5});  // inside the pillar
+  req.start = FlatState::atRest({6.0, 4.0, 1.5});  // inside the pillar
   EXPECT_EQ(replanner->replan(map, req).status, ReplanStatus::kStartInCollision);
   req.start = ref.state(0.0);
   req.start.velocity.x() = NAN;

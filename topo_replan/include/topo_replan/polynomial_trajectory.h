@@ -22,6 +22,16 @@ struct FlatState {
   Eigen::Vector3d velocity = Eigen::Vector3d::Zero();
   Eigen::Vector3d acceleration = Eigen::Vector3d::Zero();
   Eigen::Vector3d jerk = Eigen::Vector3d::Zero();
+
+  /// At rest at p (all derivatives zero).
+  static FlatState atRest(const Eigen::Vector3d& p) {
+    FlatState s;
+    s.position = p;
+    return s;
+  }
+  bool allFinite() const {
+    return position.allFinite() && velocity.allFinite() && acceleration.allFinite() && jerk.allFinite();
+  }
 };
 
 enum class TrajectoryStatus {
