@@ -179,17 +179,29 @@ TrajectoryStatus referenceTrajectory(const std::vector<Eigen::Vector3d>& waypoin
   if (waypoints.size() < 2 || !(config.max_vel_mps > 0.0) || !(config.max_acc_mps2 > 0.0) ||
       !std::isfinite(config.max_vel_mps) || !std::isfinite(config.max_acc_mps2))
     return TrajectoryStatus::kInvalidInput;
-  // Trapezoidal (rest-to-rest) time per segment at the limits.
-  const double v = config.max_vel_mps, a = config.max_acc_mps2;
-  std::vector<double> durations;
+  if (!std::isfinite(config.max_segment_length_m) || config.max_segment_length_m < 0.0)
+    return TrajectoryStatus::kInvalidInput;
+  std::vector<Eigen::Vector3d> points{waypoints.front()};
   for (size_t i = 1; i < waypoints.size(); ++i) {
     const double dist = (waypoints[i] - waypoints[i - 1]).norm();
     if (!std::isfinite(dist)) return TrajectoryStatus::kInvalidInput;
-    const double t = dist > v * v / a ? dist / v + v / a : 2.0 * std::sqrt(dist / a);
+    const int pieces = config.max_segment_length_m > 0.0
+                           ? std::min(1000, std::max(1, int(std::ceil(dist / config.max_segment_length_m))))
+                           : 1;
+    for (int k = 1; k <= pieces; ++k)
+      points.push_back(waypoints[i - 1] + (waypoints[i] - waypoints[i - 1]) * (double(k) / pieces));
+  }
+  // Trapezoidal time at the limits: per segment (rest to rest), or over the whole path (cruise).
+  const double v = config.max_vel_mps, a = config.max_acc_mps2;
+  std::vector<double> durations;
+  for (size_t i = 1; i < points.size(); ++i) {
+    const double dist = (points[i] - points[i - 1]).norm();
+    double t = dist > v * v / a ? dist / v + v / a : 2.0 * std::sqrt(dist / a);
+    if (config.cruise_timing) t = dist / v + ((i == 1) + (i + 1 == points.size())) * v / a;
     durations.push_back(std::max(t, 0.1));
   }
   for (int k = 0; k <= config.max_rescales; ++k) {
-    const TrajectoryStatus s = minimumSnapTrajectory(waypoints, durations, start, end, out);
+    const TrajectoryStatus s = minimumSnapTrajectory(points, durations, start, end, out);
     if (s != TrajectoryStatus::kSuccess) return s;
     const double vr = out->maxSpeed() / v, ar = out->maxAcceleration() / a;
     if (vr <= 1.0 + 1e-6 && ar <= 1.0 + 1e-6) return TrajectoryStatus::kSuccess;

@@ -46,6 +46,7 @@ bool TopoReplanner::Config::validate(std::string* why) const {
   if (!optimizer.validate(&sub)) err << "optimizer: " << sub << "; ";
   if (!(std::isfinite(horizon_m) && horizon_m > 0.0)) err << "horizon_m must be positive; ";
   if (!(std::isfinite(reference_clearance_m) && reference_clearance_m >= 0.0)) err << "reference_clearance_m must be >= 0; ";
+  if (!(std::isfinite(local_goal_margin_m) && local_goal_margin_m >= 0.0)) err << "local_goal_margin_m must be >= 0; ";
   if (!(reference_sample_s >= 1e-4 && reference_sample_s < 1.0)) err << "reference_sample_s must be in [1e-4, 1); ";
   if (!(control_point_spacing_m > 0.0)) err << "control_point_spacing_m must be positive; ";
   if (num_threads < 1 || num_threads > 64) err << "num_threads must be in [1, 64]; ";
@@ -68,6 +69,11 @@ TopoReplanner::TopoReplanner(const Config& config)
     : config_(config),
       pool_(config.num_threads),
       optimizers_(size_t(config.num_threads), PathGuidedOptimizer(config.optimizer)),
+      checker_([&] {
+        PathGuidedOptimizer::Config c = config.optimizer;
+        c.reallocate_time = false;
+        return c;
+      }()),
       search_(config.search),
       astar_(config.astar) {}
 
@@ -105,7 +111,7 @@ LocalProblem TopoReplanner::localProblem(const EsdfMap& map, const ReplanRequest
     return q.status == QueryStatus::kOutOfMap || q.status == QueryStatus::kInvalidInput ||
            q.distance < config_.reference_clearance_m || !search_free.isFree(p);
   };
-  double arc = 0.0, t_h = t0;
+  double arc = 0.0, t_h = t0, last_collision_s = -1.0;
   Eigen::Vector3d previous = start.position;
   while (t_h < T && arc < config_.horizon_m) {
     const double t_next = std::min(T, t_h + dt);
@@ -113,13 +119,30 @@ LocalProblem TopoReplanner::localProblem(const EsdfMap& map, const ReplanRequest
     arc += (p - previous).norm();
     previous = p;
     t_h = t_next;
-    if (lp.collision_time_s < 0.0 && collides(t_h)) lp.collision_time_s = t_h;
+    if (collides(t_h)) {
+      if (lp.collision_time_s < 0.0) lp.collision_time_s = t_h;
+      last_collision_s = t_h;
+    }
   }
   lp.horizon_end_time_s = t_h;
 
   // The local goal: the horizon end, moved forward along the reference to the first safe point.
   double t_g = t_h;
   while (t_g < T && collides(t_g)) t_g = std::min(T, t_g + dt);
+  if (last_collision_s >= 0.0 && config_.local_goal_margin_m > 0.0) {
+    // At least local_goal_margin_m of free reference between the last collision and the goal
+    // (extending stops at the next collision or the end of the reference).
+    double free_arc = 0.0;
+    for (double t = last_collision_s; t < t_g; t += dt)
+      free_arc += (ref.position(std::min(t + dt, t_g)) - ref.position(t)).norm();
+    if (collides(t_h)) free_arc = 0.0;  // t_g is then the first free point after the collision
+    while (t_g < T && free_arc < config_.local_goal_margin_m) {
+      const double t_next = std::min(T, t_g + dt);
+      if (collides(t_next)) break;
+      free_arc += (ref.position(t_next) - ref.position(t_g)).norm();
+      t_g = t_next;
+    }
+  }
   lp.goal_time_s = t_g;
   lp.goal = ref.position(t_g);
   if (map.query(lp.goal).status == QueryStatus::kOutOfMap)
@@ -172,10 +195,15 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
 
   // A free reference within the horizon is kept (as a verified spline), without searching.
   if (lp.collision_time_s < 0.0) {
-    const OptimizationResult checked = optimizers_.front().check(lp.initial, map);
+    // Without time reallocation: a reference segment that breaks the limits as fitted is optimised
+    // like a colliding one rather than stretched (which would change the start velocity).
+    const OptimizationResult checked = checker_.check(lp.initial, map);
     if (checked.status == OptimizationStatus::kSuccess) {
       result.status = ReplanStatus::kSuccess;
       result.trajectory = checked.spline;
+      result.stats.start_repaired = repairStart(request.start, map, &result.trajectory);
+      result.stats.start_velocity_jump_mps =
+          (result.trajectory.derivative().evaluate(0.0) - request.start.velocity).norm();
       result.stats.total_ms = msSince(t_begin);
       return result;
     }
@@ -229,8 +257,28 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
   if (result.chosen < 0) return fail(ReplanStatus::kOptimizationFailed, "no candidate is collision-free and feasible");
   result.status = ReplanStatus::kSuccess;
   result.trajectory = result.candidates[size_t(result.chosen)].result.spline;
+  result.stats.start_repaired = repairStart(request.start, map, &result.trajectory);
+  result.stats.start_velocity_jump_mps = (result.trajectory.derivative().evaluate(0.0) - request.start.velocity).norm();
   result.stats.total_ms = msSince(t_begin);
   return result;
+}
+
+bool TopoReplanner::repairStart(const FlatState& start, const EsdfMap& map, UniformBspline* trajectory) const {
+  const UniformBspline vel = trajectory->derivative();
+  const Eigen::Vector3d v0 = vel.evaluate(0.0), a0 = vel.derivative().evaluate(0.0);
+  if ((v0 - start.velocity).norm() < 1e-6 && (a0 - start.acceleration).norm() < 1e-6) return false;
+  const double dt = trajectory->knotSpan(), duration = trajectory->duration();
+  const int segments = trajectory->numSegments();
+  std::vector<Eigen::Vector3d> points;
+  for (int k = 0; k <= segments; ++k) points.push_back(trajectory->evaluate(std::min(duration, k * dt)));
+  points.front() = start.position;
+  UniformBspline refit;
+  if (!UniformBspline::fitToPoints(points, dt, start.velocity, start.acceleration, vel.evaluate(duration),
+                                   vel.derivative().evaluate(duration), trajectory->degree(), &refit))
+    return false;
+  if (checker_.check(refit, map).status != OptimizationStatus::kSuccess) return false;
+  *trajectory = refit;
+  return true;
 }
 
 }  // namespace topo_planner

@@ -84,6 +84,13 @@ struct ReferenceConfig {
   double max_vel_mps = 3.0;    ///< speed limit [m/s]
   double max_acc_mps2 = 2.5;   ///< acceleration limit [m/s^2]
   int max_rescales = 30;       ///< budget of time stretches to meet the limits
+  /// Longer segments are split by evenly spaced waypoints on the straight line [m]; 0 = never.
+  /// With cruise timing this gives a reference that cruises at max_vel_mps instead of the slow
+  /// start and end of one long degree-7 segment.
+  double max_segment_length_m = 0.0;
+  /// Segment times dist / max_vel, plus max_vel / max_acc on the first and last segment (a
+  /// trapezoid over the whole path), instead of a rest-to-rest trapezoid per segment.
+  bool cruise_timing = false;
 };
 
 /// Minimum-snap trajectory through waypoints, segment times from a trapezoidal speed profile per

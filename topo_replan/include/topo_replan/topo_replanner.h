@@ -7,6 +7,12 @@
 // returns the best verified one. When the search finds no path, or no candidate passes the final
 // check, one more candidate guided by a grid A* path is tried as a last resort.
 //
+// Start state: the optimiser keeps the start control points, but its time reallocation (stretching
+// the knot span to meet the limits) scales the start velocity and acceleration too. The chosen
+// trajectory is then refitted through its own knot positions with the exact start derivatives and
+// checked again (without reallocation); when that refit fails the check the stretched trajectory
+// is kept and the velocity step is reported (stats.start_velocity_jump_mps).
+//
 // Selection: among the candidates that passed the optimiser's final check (collision-free along the
 // curve at its clearance, velocity and acceleration within limits), the one with the least
 //   cost = jerk integral [m^2/s^5] + duration_weight * duration [s]
@@ -84,6 +90,8 @@ struct ReplanStats {
   double search_ms = 0.0;        ///< topological search (+ A* fallback)
   double optimize_ms = 0.0;      ///< the parallel optimisation, wall time
   double total_ms = 0.0;
+  bool start_repaired = false;   ///< time reallocation changed the start derivatives and a refit restored them
+  double start_velocity_jump_mps = 0.0;  ///< |v(0) - start velocity| of the returned trajectory
   int paths = 0;                 ///< guide paths optimised
   int feasible_candidates = 0;   ///< candidates that passed the final check
   TopoSearchStats search;
@@ -111,6 +119,10 @@ class TopoReplanner {
     GridAStar::Config astar;              ///< last-resort guide (no topological path, or none passed)
     double horizon_m = 7.0;               ///< length of reference checked and replanned [m]
     double reference_clearance_m = 0.3;   ///< the reference collides where the ESDF is below this [m]
+    /// When the reference collides at the horizon, the local goal is the first reference point past
+    /// it that is followed by this much collision-free reference (not just the first free point:
+    /// a goal right behind an obstacle forces a hairpin around it) [m]. 0 in the benchmarks.
+    double local_goal_margin_m = 0.0;
     double reference_sample_s = 0.01;     ///< time step of the reference check, at least 1e-4 [s]
     double control_point_spacing_m = 0.35;  ///< initial spline: about one control point per this [m]
     int num_threads = 2;                  ///< optimisation workers, the caller included
@@ -133,7 +145,11 @@ class TopoReplanner {
 
   Config config_;
   ThreadPool pool_;
+  /// The refit described in the class comment; false (trajectory unchanged) when not needed or not safe.
+  bool repairStart(const FlatState& start, const EsdfMap& map, UniformBspline* trajectory) const;
+
   std::vector<PathGuidedOptimizer> optimizers_;  // one per worker
+  PathGuidedOptimizer checker_;                  // final check without time reallocation
   TopoPathSearch search_;
   GridAStar astar_;
 };

@@ -1,0 +1,170 @@
+#pragma once
+// The replanning state machine of the paper's system (Sect. V and VI-C: "the local planner
+// periodically checks the global reference within the horizon and replans when it collides"), kept
+// free of ROS so its transitions are tested without a roscore. The planner node feeds it odometry,
+// goals and the map, and publishes what it returns.
+//
+// States
+//   INIT            no odometry yet; goals are refused (kNoOdometry)
+//   WAIT_TARGET     hovering, no mission
+//   GEN_NEW_TRAJ    a new global reference (minimum snap from the current state through the goals)
+//                   is built and the first local trajectory planned on it
+//   EXEC_TRAJ       flying the current local trajectory; it is checked against the latest map every
+//                   tick, and replanned when it collides ahead, or after replan_interval_s of
+//                   execution so that the horizon moves along the reference
+//   REPLAN_TRAJ     planning from the state on the current trajectory at the time the new one takes
+//                   over (now + takeover_delay_s); on failure the current one is kept while it is
+//                   safe and planning is retried every tick
+//   EMERGENCY_STOP  no safe trajectory and a collision closer than the braking distance: a braking
+//                   trajectory (constant deceleration along the velocity) is executed; once stopped,
+//                   a new reference from the stopping point is generated
+//
+// Every trajectory it returns has passed a collision and feasibility check on the map it was
+// planned on (the replanner's final check; the braking trajectory is checked too, and its result
+// reported, since braking is the last safe action left).
+//
+// Threads: two callers, both may run at the same time: tick() (the planning thread: state machine
+// and planning) and checkSafety() (the safety thread: collision check of the executing trajectory and
+// the emergency stop). setOdometry()/setGoals() may come from a third. One mutex guards the state;
+// tick() releases it while it plans and commits its result only if no other trajectory (a braking
+// one) took over in the meantime. The map passed in must not change during the call (the caller
+// holds its read lock).
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "topo_replan/topo_replanner.h"
+
+namespace topo_planner {
+
+enum class FsmState { kInit, kWaitTarget, kGenNewTraj, kExecTraj, kReplanTraj, kEmergencyStop };
+const char* toString(FsmState state);
+
+enum class GoalStatus {
+  kAccepted,
+  kNoOdometry,      ///< no (valid) odometry yet
+  kInvalidInput,    ///< empty list, NaN/inf coordinates
+  kGoalInObstacle,  ///< a goal is closer than goal_clearance_m to a known obstacle
+  kGoalOutOfMap,    ///< a goal lies outside the map window
+  kReferenceFailed, ///< no minimum-snap reference through the goals
+};
+const char* toString(GoalStatus status);
+
+/// A trajectory the vehicle executes: a B-spline from start_time_s.
+struct ExecTrajectory {
+  int64_t id = -1;
+  double start_time_s = 0.0;   ///< when it takes over [s, caller's clock]
+  UniformBspline spline;
+  double reference_start_s = 0.0;  ///< reference time at its start ...
+  double reference_end_s = 0.0;    ///< ... and where it rejoins the reference
+  bool ends_at_goal = false;       ///< rejoins the reference at its end (the last goal, at rest)
+  bool braking = false;            ///< an emergency braking trajectory
+  double endTime() const { return start_time_s + spline.duration(); }
+};
+
+/// What one call did, for logging and the ReplanEvent message.
+struct FsmEvent {
+  enum class Trigger { kNewGoal, kCollisionAhead, kPeriodic, kRetry, kEmergency };
+  Trigger trigger = Trigger::kNewGoal;
+  FsmState state = FsmState::kInit;     ///< state when it started
+  bool published = false;               ///< a new trajectory was returned
+  ReplanStatus status = ReplanStatus::kSuccess;
+  std::string fallback = "none";        ///< none | keep_current | stop | give_up | discarded_late
+  std::string message;
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();  ///< start of the planned trajectory
+  ReplanStats stats;
+};
+const char* toString(FsmEvent::Trigger trigger);
+
+struct FsmOutput {
+  std::optional<ExecTrajectory> trajectory;       ///< publish this (already checked)
+  std::optional<FsmEvent> event;                  ///< a planning call happened
+  std::optional<ReplanResult> plan;               ///< its full result (candidates etc., for rviz)
+  bool new_reference = false;                     ///< reference() changed
+  bool goal_reached = false;                      ///< the last goal of the mission was reached
+  std::string message;                            ///< a notable transition, for the log
+};
+
+class ReplanFsm {
+ public:
+  struct Config {
+    TopoReplanner::Config replanner;  ///< search, optimiser and horizon (horizon_m)
+    ReferenceConfig reference;        ///< limits of the global reference (keep <= the optimiser's)
+    double takeover_delay_s = 0.1;    ///< a new trajectory takes over this long after planning starts [s]
+    double replan_interval_s = 1.0;   ///< replan after executing the current one this long [s]
+    double safety_clearance_m = 0.2;  ///< the executing trajectory collides below this ESDF distance [m]
+    double safety_sample_s = 0.02;    ///< time step of the safety check [s]
+    double brake_acc_mps2 = 2.5;      ///< deceleration of the braking trajectory [m/s^2]
+    double emergency_margin_s = 0.3;  ///< stop when the collision is closer than the braking time plus this [s]
+    double goal_clearance_m = 0.3;    ///< goals closer to a known obstacle are refused [m]
+    double goal_tolerance_m = 0.3;    ///< the mission ends when the trajectory has ended and the vehicle is this close [m]
+    double stopped_speed_mps = 0.2;   ///< below this the vehicle counts as stopped after braking [m/s]
+    int max_plan_failures = 30;       ///< consecutive failed plans in GEN_NEW_TRAJ before giving up the mission
+
+    bool validate(std::string* why) const;
+  };
+
+  static std::unique_ptr<ReplanFsm> create(const Config& config, std::string* error);
+  const Config& config() const { return config_; }
+
+  /// Latest vehicle state (position and world-frame velocity) at time t. Non-finite values are
+  /// refused (false) and the last valid odometry is kept.
+  bool setOdometry(double t, const Eigen::Vector3d& position, const Eigen::Vector3d& velocity);
+  /// A new mission (replaces the current one): the goals are checked against the map and the
+  /// reference is built at the next tick(); the status of that check is returned by tick() in
+  /// FsmOutput::message and kept in lastGoalStatus(). Immediate refusal for no odometry or bad input.
+  GoalStatus setGoals(const std::vector<Eigen::Vector3d>& goals);
+
+  /// The planning thread: runs the state machine once at time t on the map. `now`, when given,
+  /// is the clock: a plan that finishes after its takeover time (t + takeover_delay_s) is
+  /// discarded rather than published late.
+  FsmOutput tick(double t, const EsdfMap& map, const std::function<double()>& now = {});
+  /// The safety thread: checks the executing trajectory from t; flags a replan when it collides,
+  /// and returns a braking trajectory when the collision is too close to wait for one.
+  FsmOutput checkSafety(double t, const EsdfMap& map);
+
+  FsmState state() const;
+  GoalStatus lastGoalStatus() const;
+  std::optional<ExecTrajectory> current() const;
+  PolynomialTrajectory reference() const;
+
+ private:
+  explicit ReplanFsm(const Config& config, std::unique_ptr<TopoReplanner> replanner);
+
+  // All *Locked functions expect mutex_ held.
+  void setState(FsmState s, FsmOutput* out, const std::string& why);
+  bool startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out);
+  FlatState takeoverStateLocked(double t_takeover) const;
+  double referenceTimeAtLocked(double t) const;
+  /// First time >= t at which the trajectory comes closer than safety_clearance_m; -1 if none.
+  double firstCollisionTime(const ExecTrajectory& traj, double t, const EsdfMap& map) const;
+  ExecTrajectory brakingTrajectory(double t, const EsdfMap& map, std::string* report) const;
+  void plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, std::unique_lock<std::mutex>* lock,
+            FsmOutput* out, const std::function<double()>& now);
+
+  Config config_;
+  std::unique_ptr<TopoReplanner> replanner_;  // used by tick() only, outside the lock
+
+  mutable std::mutex mutex_;
+  FsmState state_ = FsmState::kInit;
+  bool have_odom_ = false;
+  double odom_time_s_ = 0.0;
+  Eigen::Vector3d odom_position_ = Eigen::Vector3d::Zero();
+  Eigen::Vector3d odom_velocity_ = Eigen::Vector3d::Zero();
+  std::vector<Eigen::Vector3d> pending_goals_;  // set by setGoals, consumed by tick
+  bool goals_pending_ = false;
+  std::vector<Eigen::Vector3d> goals_;          // the current mission
+  GoalStatus last_goal_status_ = GoalStatus::kAccepted;
+  PolynomialTrajectory reference_;
+  std::optional<ExecTrajectory> current_;
+  int64_t next_id_ = 0;
+  bool collision_ahead_ = false;  // set by checkSafety, consumed by tick
+  int consecutive_failures_ = 0;
+};
+
+}  // namespace topo_planner

@@ -1,0 +1,426 @@
+#include "topo_replan/replan_fsm.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace topo_planner {
+
+const char* toString(FsmState state) {
+  switch (state) {
+    case FsmState::kInit: return "INIT";
+    case FsmState::kWaitTarget: return "WAIT_TARGET";
+    case FsmState::kGenNewTraj: return "GEN_NEW_TRAJ";
+    case FsmState::kExecTraj: return "EXEC_TRAJ";
+    case FsmState::kReplanTraj: return "REPLAN_TRAJ";
+    case FsmState::kEmergencyStop: return "EMERGENCY_STOP";
+  }
+  return "unknown";
+}
+
+const char* toString(GoalStatus status) {
+  switch (status) {
+    case GoalStatus::kAccepted: return "kAccepted";
+    case GoalStatus::kNoOdometry: return "kNoOdometry";
+    case GoalStatus::kInvalidInput: return "kInvalidInput";
+    case GoalStatus::kGoalInObstacle: return "kGoalInObstacle";
+    case GoalStatus::kGoalOutOfMap: return "kGoalOutOfMap";
+    case GoalStatus::kReferenceFailed: return "kReferenceFailed";
+  }
+  return "unknown";
+}
+
+const char* toString(FsmEvent::Trigger trigger) {
+  switch (trigger) {
+    case FsmEvent::Trigger::kNewGoal: return "new_goal";
+    case FsmEvent::Trigger::kCollisionAhead: return "collision_ahead";
+    case FsmEvent::Trigger::kPeriodic: return "periodic";
+    case FsmEvent::Trigger::kRetry: return "retry";
+    case FsmEvent::Trigger::kEmergency: return "emergency";
+  }
+  return "unknown";
+}
+
+bool ReplanFsm::Config::validate(std::string* why) const {
+  auto bad = [&](const std::string& m) {
+    if (why) *why = m;
+    return false;
+  };
+  std::string sub;
+  if (!replanner.validate(&sub)) return bad("replanner: " + sub);
+  if (!(reference.max_vel_mps > 0.0) || !(reference.max_acc_mps2 > 0.0) || reference.max_rescales < 1)
+    return bad("reference limits must be positive");
+  if (!(takeover_delay_s >= 0.0) || !(takeover_delay_s < 5.0)) return bad("takeover_delay_s must be in [0, 5)");
+  if (!(replan_interval_s > 0.0)) return bad("replan_interval_s must be positive");
+  if (!(safety_clearance_m >= 0.0) || !std::isfinite(safety_clearance_m)) return bad("safety_clearance_m must be >= 0");
+  if (!(safety_sample_s >= 1e-3) || !std::isfinite(safety_sample_s)) return bad("safety_sample_s must be >= 0.001");
+  if (!(brake_acc_mps2 > 0.0) || !std::isfinite(brake_acc_mps2)) return bad("brake_acc_mps2 must be positive");
+  if (!(emergency_margin_s >= 0.0) || !std::isfinite(emergency_margin_s)) return bad("emergency_margin_s must be >= 0");
+  if (!(goal_clearance_m >= 0.0) || !std::isfinite(goal_clearance_m)) return bad("goal_clearance_m must be >= 0");
+  if (!(goal_tolerance_m > 0.0) || !std::isfinite(goal_tolerance_m)) return bad("goal_tolerance_m must be positive");
+  if (!(stopped_speed_mps > 0.0) || !std::isfinite(stopped_speed_mps)) return bad("stopped_speed_mps must be positive");
+  if (max_plan_failures < 1) return bad("max_plan_failures must be >= 1");
+  return true;
+}
+
+std::unique_ptr<ReplanFsm> ReplanFsm::create(const Config& config, std::string* error) {
+  std::string why;
+  if (!config.validate(&why)) {
+    if (error) *error = "invalid FSM config: " + why;
+    return nullptr;
+  }
+  std::unique_ptr<TopoReplanner> replanner = TopoReplanner::create(config.replanner, error);
+  if (!replanner) return nullptr;
+  return std::unique_ptr<ReplanFsm>(new ReplanFsm(config, std::move(replanner)));
+}
+
+ReplanFsm::ReplanFsm(const Config& config, std::unique_ptr<TopoReplanner> replanner)
+    : config_(config), replanner_(std::move(replanner)) {}
+
+FsmState ReplanFsm::state() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return state_;
+}
+
+GoalStatus ReplanFsm::lastGoalStatus() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return last_goal_status_;
+}
+
+std::optional<ExecTrajectory> ReplanFsm::current() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return current_;
+}
+
+PolynomialTrajectory ReplanFsm::reference() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return reference_;
+}
+
+bool ReplanFsm::setOdometry(double t, const Eigen::Vector3d& position, const Eigen::Vector3d& velocity) {
+  if (!std::isfinite(t) || !position.allFinite() || !velocity.allFinite()) return false;
+  std::lock_guard<std::mutex> lock(mutex_);
+  have_odom_ = true;
+  odom_time_s_ = t;
+  odom_position_ = position;
+  odom_velocity_ = velocity;
+  return true;
+}
+
+GoalStatus ReplanFsm::setGoals(const std::vector<Eigen::Vector3d>& goals) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (goals.empty()) return last_goal_status_ = GoalStatus::kInvalidInput;
+  for (const Eigen::Vector3d& g : goals)
+    if (!g.allFinite()) return last_goal_status_ = GoalStatus::kInvalidInput;
+  if (!have_odom_) return last_goal_status_ = GoalStatus::kNoOdometry;
+  pending_goals_ = goals;
+  goals_pending_ = true;
+  return GoalStatus::kAccepted;
+}
+
+void ReplanFsm::setState(FsmState s, FsmOutput* out, const std::string& why) {
+  if (s == state_) return;
+  if (!out->message.empty()) out->message += "; ";
+  out->message += std::string(toString(state_)) + " -> " + toString(s) + (why.empty() ? "" : " (" + why + ")");
+  state_ = s;
+}
+
+FlatState ReplanFsm::takeoverStateLocked(double t_takeover) const {
+  if (!current_) {
+    // Not commanded yet: the controller holds the position where it started.
+    return FlatState::atRest(odom_position_);
+  }
+  const UniformBspline& s = current_->spline;
+  const double tau = std::clamp(t_takeover - current_->start_time_s, 0.0, s.duration());
+  FlatState st;
+  st.position = s.evaluate(tau);
+  const UniformBspline vel = s.derivative();
+  st.velocity = vel.evaluate(tau);
+  if (vel.degree() >= 1) {
+    const UniformBspline acc = vel.derivative();
+    st.acceleration = acc.evaluate(tau);
+    if (acc.degree() >= 1) st.jerk = acc.derivative().evaluate(tau);
+  }
+  if (tau >= s.duration()) st.velocity = st.acceleration = st.jerk = Eigen::Vector3d::Zero();
+  return st;
+}
+
+double ReplanFsm::referenceTimeAtLocked(double t) const {
+  if (!current_ || current_->braking) return 0.0;
+  const double d = current_->spline.duration();
+  const double frac = d > 0.0 ? std::clamp((t - current_->start_time_s) / d, 0.0, 1.0) : 1.0;
+  const double estimate = current_->reference_start_s + frac * (current_->reference_end_s - current_->reference_start_s);
+  // The local trajectory is timed differently from the reference (detours, time reallocation): take
+  // the reference point closest to where the vehicle will be, near the proportional estimate.
+  const Eigen::Vector3d p = current_->spline.evaluate(std::clamp(t - current_->start_time_s, 0.0, d));
+  double best = estimate, best_d2 = (reference_.position(estimate) - p).squaredNorm();
+  for (double s = std::max(0.0, estimate - 2.0); s <= std::min(reference_.duration(), estimate + 2.0); s += 0.01) {
+    const double d2 = (reference_.position(s) - p).squaredNorm();
+    if (d2 < best_d2) best = s, best_d2 = d2;
+  }
+  return best;
+}
+
+double ReplanFsm::firstCollisionTime(const ExecTrajectory& traj, double t, const EsdfMap& map) const {
+  const double begin = std::max(t, traj.start_time_s), end = traj.endTime();
+  for (double s = begin;; s = std::min(end, s + config_.safety_sample_s)) {
+    const DistanceQuery q = map.query(traj.spline.evaluate(s - traj.start_time_s));
+    if (q.status == QueryStatus::kOutOfMap || q.status == QueryStatus::kInvalidInput ||
+        q.distance < config_.safety_clearance_m)
+      return s;
+    if (s >= end) break;
+  }
+  return -1.0;
+}
+
+ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::string* report) const {
+  FlatState s0 = takeoverStateLocked(t);
+  if (!current_) s0.velocity = odom_velocity_;
+  const double speed = s0.velocity.norm();
+  std::vector<Eigen::Vector3d> points;
+  double interval = 0.1;
+  Eigen::Vector3d start_acc = Eigen::Vector3d::Zero();
+  if (speed < 0.05) {
+    points.assign(4, s0.position);
+    s0.velocity.setZero();
+  } else {
+    // Constant deceleration along the velocity: p(tau) = p0 + u (v tau - a tau^2 / 2).
+    const Eigen::Vector3d u = s0.velocity / speed;
+    const double a = config_.brake_acc_mps2, T = speed / a;
+    const int n = std::max(4, int(std::ceil(T / 0.05)));
+    interval = T / n;
+    for (int k = 0; k <= n; ++k) {
+      const double tau = k * interval;
+      points.push_back(s0.position + u * (speed * tau - 0.5 * a * tau * tau));
+    }
+    start_acc = -a * u;
+  }
+  ExecTrajectory brake;
+  brake.start_time_s = t;
+  brake.braking = true;
+  if (!UniformBspline::fitToPoints(points, interval, s0.velocity, start_acc, Eigen::Vector3d::Zero(),
+                                   Eigen::Vector3d::Zero(), 3, &brake.spline)) {
+    // Only for a degenerate state; hold the position instead (a spline of equal points).
+    brake.spline = UniformBspline::straightLine(s0.position, s0.position, 6, 3, 0.1);
+  }
+  const double hit = firstCollisionTime(brake, t, map);
+  if (report)
+    *report = hit < 0.0 ? "braking trajectory checked: collision-free"
+                        : "braking trajectory checked: comes within the safety clearance " +
+                              std::to_string(hit - t) + " s after braking starts";
+  return brake;
+}
+
+bool ReplanFsm::startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out) {
+  goals_pending_ = false;
+  const std::vector<Eigen::Vector3d> goals = pending_goals_;
+  auto refuse = [&](GoalStatus status, const std::string& why) {
+    last_goal_status_ = status;
+    if (!out->message.empty()) out->message += "; ";
+    out->message += std::string("goal refused: ") + toString(status) + ": " + why;
+    return false;
+  };
+  for (size_t i = 0; i < goals.size(); ++i) {
+    const DistanceQuery q = map.query(goals[i]);
+    if (q.status == QueryStatus::kOutOfMap || q.status == QueryStatus::kInvalidInput)
+      return refuse(GoalStatus::kGoalOutOfMap, "goal " + std::to_string(i) + " is outside the map");
+    if (q.distance < config_.goal_clearance_m)
+      return refuse(GoalStatus::kGoalInObstacle, "goal " + std::to_string(i) + " is " + std::to_string(q.distance) +
+                                                     " m from an obstacle");
+  }
+  // The reference starts from the state at which the first trajectory on it will take over.
+  FlatState start = takeoverStateLocked(t + config_.takeover_delay_s);
+  start.jerk.setZero();  // the reference's jerk at the start is free of the spline's knots
+  std::vector<Eigen::Vector3d> waypoints{start.position};
+  for (const Eigen::Vector3d& g : goals)
+    if ((g - waypoints.back()).norm() > 1e-3) waypoints.push_back(g);
+  if (waypoints.size() < 2) waypoints.push_back(goals.back() + Eigen::Vector3d(1e-3, 0, 0));
+  PolynomialTrajectory ref;
+  const TrajectoryStatus status =
+      referenceTrajectory(waypoints, start, FlatState::atRest(waypoints.back()), config_.reference, &ref);
+  if (status != TrajectoryStatus::kSuccess)
+    return refuse(GoalStatus::kReferenceFailed, std::string("minimum-snap reference: ") + toString(status));
+  goals_ = goals;
+  reference_ = std::move(ref);
+  last_goal_status_ = GoalStatus::kAccepted;
+  out->new_reference = true;
+  setState(FsmState::kGenNewTraj, out, "new reference, " + std::to_string(goals.size()) + " goal(s)");
+  return true;
+}
+
+void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, std::unique_lock<std::mutex>* lock,
+                     FsmOutput* out, const std::function<double()>& now) {
+  const bool generating = state_ == FsmState::kGenNewTraj;
+  const double t_take = t + config_.takeover_delay_s;
+  ReplanRequest request;
+  request.start = takeoverStateLocked(t_take);
+  request.reference_time_s = generating ? 0.0 : referenceTimeAtLocked(t_take);
+  const PolynomialTrajectory reference = reference_;
+  request.reference = &reference;
+  const int64_t current_id = current_ ? current_->id : -1;
+  FsmEvent event;
+  event.trigger = trigger;
+  event.state = state_;
+  event.position = request.start.position;
+  if (!generating) setState(FsmState::kReplanTraj, out, toString(trigger));
+
+  lock->unlock();
+  ReplanResult result = replanner_->replan(map, request);
+  const double finished = now ? now() : t;
+  lock->lock();
+
+  event.status = result.status;
+  event.message = result.message;
+  event.stats = result.stats;
+  const bool superseded = (current_ ? current_->id : -1) != current_id;
+  if (result.status == ReplanStatus::kSuccess && !superseded && finished <= t_take) {
+    ExecTrajectory traj;
+    traj.id = next_id_++;
+    traj.start_time_s = t_take;
+    traj.spline = result.trajectory;
+    traj.reference_start_s = result.local_start_time_s;
+    traj.reference_end_s = result.local_goal_time_s;
+    traj.ends_at_goal = result.local_goal_time_s >= reference.duration() - 1e-6;
+    current_ = traj;
+    collision_ahead_ = false;
+    consecutive_failures_ = 0;
+    event.published = true;
+    out->trajectory = traj;
+    setState(FsmState::kExecTraj, out, "");
+  } else {
+    ++consecutive_failures_;
+    if (result.status == ReplanStatus::kSuccess)
+      event.fallback = superseded ? "discarded_superseded" : "discarded_late";
+    if (superseded) {
+      // A braking trajectory took over while planning: the emergency stop owns the state now.
+    } else if (generating) {
+      const bool moving = current_ && !current_->braking && t < current_->endTime();
+      event.fallback = consecutive_failures_ >= config_.max_plan_failures ? "give_up"
+                       : moving                                           ? "keep_current"
+                                                                          : "hover_retry";
+    } else {
+      event.fallback = "keep_current";
+    }
+    if (event.fallback == "give_up") {
+      setState(FsmState::kWaitTarget, out, "no trajectory after " + std::to_string(consecutive_failures_) + " tries");
+      consecutive_failures_ = 0;
+    } else if (!superseded && !generating) {
+      setState(FsmState::kExecTraj, out, "");
+      collision_ahead_ = collision_ahead_ || trigger == FsmEvent::Trigger::kCollisionAhead;
+    }
+  }
+  out->event = event;
+  out->plan = std::move(result);
+}
+
+FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<double()>& now) {
+  std::unique_lock<std::mutex> lock(mutex_);
+  FsmOutput out;
+  if (!std::isfinite(t)) return out;
+  switch (state_) {
+    case FsmState::kInit:
+      if (have_odom_) setState(FsmState::kWaitTarget, &out, "odometry received");
+      if (goals_pending_ && startGoalsLocked(t, map, &out)) plan(t, map, FsmEvent::Trigger::kNewGoal, &lock, &out, now);
+      break;
+    case FsmState::kWaitTarget:
+      if (goals_pending_ && startGoalsLocked(t, map, &out)) plan(t, map, FsmEvent::Trigger::kNewGoal, &lock, &out, now);
+      break;
+    case FsmState::kGenNewTraj: {
+      // A retry rebuilds the reference from where the vehicle will be, so it starts from its state.
+      const bool fresh = goals_pending_;
+      if (!fresh) pending_goals_ = goals_;
+      goals_pending_ = true;
+      if (startGoalsLocked(t, map, &out))
+        plan(t, map, fresh ? FsmEvent::Trigger::kNewGoal : FsmEvent::Trigger::kRetry, &lock, &out, now);
+      else if (!fresh)
+        setState(FsmState::kWaitTarget, &out, "the mission's goals are no longer valid");
+      break;
+    }
+    case FsmState::kExecTraj:
+    case FsmState::kReplanTraj: {
+      if (goals_pending_) {
+        if (startGoalsLocked(t, map, &out)) plan(t, map, FsmEvent::Trigger::kNewGoal, &lock, &out, now);
+        break;
+      }
+      if (!current_) {
+        setState(FsmState::kWaitTarget, &out, "no trajectory");
+        break;
+      }
+      const bool ended = t >= current_->endTime();
+      if (current_->ends_at_goal && ended) {
+        if ((odom_position_ - goals_.back()).norm() <= config_.goal_tolerance_m) {
+          out.goal_reached = true;
+          setState(FsmState::kWaitTarget, &out, "goal reached");
+        }
+        break;
+      }
+      if (collision_ahead_) {
+        plan(t, map, consecutive_failures_ > 0 ? FsmEvent::Trigger::kRetry : FsmEvent::Trigger::kCollisionAhead,
+             &lock, &out, now);
+      } else if (!current_->ends_at_goal && (t - current_->start_time_s >= config_.replan_interval_s || ended)) {
+        plan(t, map, consecutive_failures_ > 0 ? FsmEvent::Trigger::kRetry : FsmEvent::Trigger::kPeriodic, &lock,
+             &out, now);
+      }
+      break;
+    }
+    case FsmState::kEmergencyStop: {
+      const bool stopped = (!current_ || t >= current_->endTime()) && odom_velocity_.norm() < config_.stopped_speed_mps;
+      if (!stopped) break;
+      // Stopped: a new reference from here through the mission's goals (or the newer ones).
+      if (!goals_pending_) {
+        pending_goals_ = goals_;
+        goals_pending_ = !goals_.empty();
+      }
+      if (!goals_pending_) {
+        setState(FsmState::kWaitTarget, &out, "stopped, no mission");
+      } else if (startGoalsLocked(t, map, &out)) {
+        plan(t, map, FsmEvent::Trigger::kRetry, &lock, &out, now);
+      } else {
+        setState(FsmState::kWaitTarget, &out, "stopped, the mission's goals are no longer valid");
+      }
+      break;
+    }
+  }
+  return out;
+}
+
+FsmOutput ReplanFsm::checkSafety(double t, const EsdfMap& map) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  FsmOutput out;
+  if (!current_ || current_->braking || !std::isfinite(t) || state_ == FsmState::kInit) return out;
+  if (t > current_->endTime() && state_ == FsmState::kWaitTarget) return out;
+  // Time to stop from the current speed, plus the margin: a collision (or the end of a trajectory
+  // that ends moving, past which nothing is planned) closer than that cannot wait for a replan.
+  const FlatState s = takeoverStateLocked(t);
+  const double stop_time = s.velocity.norm() / config_.brake_acc_mps2 + config_.emergency_margin_s +
+                           config_.takeover_delay_s;
+  const double hit = firstCollisionTime(*current_, t, map);
+  const double end_speed =
+      current_->spline.derivative().evaluate(std::max(0.0, current_->spline.duration() - 1e-6)).norm();
+  const bool runs_out = !current_->ends_at_goal && end_speed > config_.stopped_speed_mps &&
+                        current_->endTime() - t <= stop_time;
+  if (hit >= 0.0) collision_ahead_ = true;
+  if (!runs_out && (hit < 0.0 || hit - t > stop_time)) return out;
+
+  FsmEvent event;
+  event.trigger = FsmEvent::Trigger::kEmergency;
+  event.state = state_;
+  event.position = s.position;
+  event.status = ReplanStatus::kOptimizationFailed;
+  event.fallback = "stop";
+  std::string report;
+  ExecTrajectory brake = brakingTrajectory(t, map, &report);
+  brake.id = next_id_++;
+  event.message = (hit >= 0.0 ? "collision in " + std::to_string(hit - t) + " s; "
+                                : "the trajectory ends moving in " + std::to_string(current_->endTime() - t) +
+                                      " s with no replan; ") +
+                  report;
+  event.published = true;
+  current_ = brake;
+  collision_ahead_ = false;
+  setState(FsmState::kEmergencyStop, &out, event.message);
+  out.trajectory = brake;
+  out.event = event;
+  return out;
+}
+
+}  // namespace topo_planner
