@@ -1,0 +1,315 @@
+#include "plan_manage/planner_server.h"
+
+#include <visualization_msgs/MarkerArray.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "plan_manage/trajectory_conversions.h"
+#include "topo_planner/Bspline.h"
+#include "topo_planner/ReplanEvent.h"
+#include "uav_sim/ros/param_reader.h"
+
+namespace topo_planner {
+
+std::unique_ptr<PlannerServer> PlannerServer::create(const ros::NodeHandle& nh, const Config& config,
+                                                     std::string* error) {
+  std::unique_ptr<PlannerServer> server(new PlannerServer(nh, config));
+  server->fsm_ = ReplanFsm::create(config.fsm, error);
+  if (!server->fsm_) return nullptr;
+  // The mapping in ~mapping, on its own queue.
+  ros::NodeHandle mapping_nh(nh, "mapping");
+  mapping_nh.setCallbackQueue(&server->mapping_queue_);
+  server->mapping_ = MappingServer::create(mapping_nh, config.mapping, error);
+  if (!server->mapping_) return nullptr;
+
+  PlannerServer& s = *server;
+  ros::NodeHandle pnh = s.nh_;
+  s.bspline_pub_ = pnh.advertise<Bspline>("bspline", 10);
+  s.event_pub_ = pnh.advertise<ReplanEvent>("replan_event", 100);
+  s.reference_pub_ = pnh.advertise<nav_msgs::Path>("reference_path", 1, true);
+  s.traj_vis_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("vis/trajectory", 5);
+  s.candidates_vis_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("vis/candidates", 5);
+  s.guides_vis_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("vis/guide_paths", 5);
+  s.odom_sub_ = pnh.subscribe("odometry", 10, &PlannerServer::odomCallback, &s, ros::TransportHints().tcpNoDelay());
+  s.goal_sub_ = pnh.subscribe("goal", 1, &PlannerServer::goalCallback, &s);
+  s.waypoints_sub_ = pnh.subscribe("waypoints", 1, &PlannerServer::waypointsCallback, &s);
+
+  ros::NodeHandle plan_nh(pnh), safety_nh(pnh);
+  plan_nh.setCallbackQueue(&s.planning_queue_);
+  safety_nh.setCallbackQueue(&s.safety_queue_);
+  s.plan_timer_ = plan_nh.createTimer(ros::Duration(config.plan_period_s), &PlannerServer::planTimer, &s);
+  s.safety_timer_ = safety_nh.createTimer(ros::Duration(config.safety_period_s), &PlannerServer::safetyTimer, &s);
+  s.mapping_spinner_.reset(new ros::AsyncSpinner(2, &s.mapping_queue_));
+  s.planning_spinner_.reset(new ros::AsyncSpinner(1, &s.planning_queue_));
+  s.safety_spinner_.reset(new ros::AsyncSpinner(1, &s.safety_queue_));
+  s.mapping_spinner_->start();
+  s.planning_spinner_->start();
+  s.safety_spinner_->start();
+  return server;
+}
+
+PlannerServer::PlannerServer(const ros::NodeHandle& nh, const Config& config) : nh_(nh), config_(config) {}
+
+PlannerServer::~PlannerServer() {
+  // Stop the timers' threads before the FSM and the maps they use go away.
+  for (auto* spinner : {&planning_spinner_, &safety_spinner_, &mapping_spinner_})
+    if (*spinner) (*spinner)->stop();
+  plan_timer_.stop();
+  safety_timer_.stop();
+}
+
+void PlannerServer::odomCallback(const nav_msgs::OdometryConstPtr& msg) {
+  const auto& p = msg->pose.pose.position;
+  const auto& q = msg->pose.pose.orientation;
+  const auto& v = msg->twist.twist.linear;
+  Eigen::Vector3d velocity(v.x, v.y, v.z);
+  const Eigen::Quaterniond orientation(q.w, q.x, q.y, q.z);
+  if (!config_.odom_twist_in_world) {
+    const double n = orientation.norm();
+    if (!std::isfinite(n) || std::abs(n - 1.0) > 1e-2) {
+      ROS_WARN_THROTTLE(2.0, "planner: odometry with a non-unit orientation ignored");
+      return;
+    }
+    velocity = orientation.normalized() * velocity;
+  }
+  const double t = msg->header.stamp.toSec();
+  if (!fsm_->setOdometry(t, Eigen::Vector3d(p.x, p.y, p.z), velocity)) {
+    ROS_WARN_THROTTLE(2.0, "planner: odometry with NaN/inf values ignored");
+    return;
+  }
+  last_odom_time_ = ros::Time::now().toSec();
+  if (!config_.goals.empty() && !initial_goals_sent_.exchange(true)) submitGoals(config_.goals, "parameter goals_m");
+}
+
+void PlannerServer::goalCallback(const geometry_msgs::PoseStampedConstPtr& msg) {
+  if (!msg->header.frame_id.empty() && msg->header.frame_id != config_.frame_id) {
+    ROS_WARN("planner: goal in frame '%s' ignored (expected '%s')", msg->header.frame_id.c_str(),
+             config_.frame_id.c_str());
+    return;
+  }
+  submitGoals({Eigen::Vector3d(msg->pose.position.x, msg->pose.position.y, config_.goal_height_m)}, "2D Nav Goal");
+}
+
+void PlannerServer::waypointsCallback(const nav_msgs::PathConstPtr& msg) {
+  if (!msg->header.frame_id.empty() && msg->header.frame_id != config_.frame_id) {
+    ROS_WARN("planner: waypoints in frame '%s' ignored (expected '%s')", msg->header.frame_id.c_str(),
+             config_.frame_id.c_str());
+    return;
+  }
+  if (msg->poses.size() > 1000) {
+    ROS_WARN("planner: %zu waypoints refused (at most 1000)", msg->poses.size());
+    return;
+  }
+  std::vector<Eigen::Vector3d> goals;
+  for (const auto& pose : msg->poses)
+    goals.emplace_back(pose.pose.position.x, pose.pose.position.y, pose.pose.position.z);
+  submitGoals(goals, "waypoints");
+}
+
+void PlannerServer::submitGoals(const std::vector<Eigen::Vector3d>& goals, const char* source) {
+  const GoalStatus status = fsm_->setGoals(goals);
+  if (status != GoalStatus::kAccepted) {
+    ROS_WARN("planner: %s refused: %s", source, toString(status));
+    return;
+  }
+  const Eigen::Vector3d& g = goals.back();
+  ROS_INFO("planner: %s: %zu goal(s), last (%.2f, %.2f, %.2f)", source, goals.size(), g.x(), g.y(), g.z());
+}
+
+bool PlannerServer::odometryFresh(double now) const {
+  const double last = last_odom_time_;
+  return last >= 0.0 && now - last <= config_.odom_timeout_s;
+}
+
+void PlannerServer::planTimer(const ros::TimerEvent&) {
+  const double now = ros::Time::now().toSec();
+  if (!odometryFresh(now)) {
+    if (last_odom_time_ >= 0.0)
+      ROS_WARN_THROTTLE(2.0, "planner: odometry older than %.2f s; not planning", config_.odom_timeout_s);
+    return;
+  }
+  FsmOutput out;
+  mapping_->readMaps([&](const OccupancyMap&, const EsdfMap& esdf) {
+    out = fsm_->tick(now, esdf, [] { return ros::Time::now().toSec(); });
+  });
+  handle(out);
+}
+
+void PlannerServer::safetyTimer(const ros::TimerEvent&) {
+  const double now = ros::Time::now().toSec();
+  FsmOutput out;
+  mapping_->readMaps([&](const OccupancyMap&, const EsdfMap& esdf) { out = fsm_->checkSafety(now, esdf); });
+  handle(out);
+}
+
+void PlannerServer::handle(const FsmOutput& out) {
+  if (!out.message.empty()) ROS_INFO("planner: %s", out.message.c_str());
+  if (out.new_reference) publishReference();
+  if (out.trajectory) bspline_pub_.publish(toMsg(*out.trajectory, config_.frame_id));
+  if (out.event) {
+    const FsmEvent& e = *out.event;
+    ReplanEvent msg;
+    msg.header.stamp = ros::Time::now();
+    msg.header.frame_id = config_.frame_id;
+    msg.trajectory_id = out.trajectory ? out.trajectory->id : -1;
+    msg.fsm_state = toString(e.state);
+    msg.trigger = toString(e.trigger);
+    msg.status = toString(e.status);
+    msg.fallback = e.fallback;
+    msg.position.x = e.position.x(), msg.position.y = e.position.y(), msg.position.z = e.position.z();
+    msg.total_ms = e.stats.total_ms;
+    msg.search_ms = e.stats.search_ms;
+    msg.optimize_ms = e.stats.optimize_ms;
+    msg.guide_paths = e.stats.paths;
+    msg.feasible_candidates = e.stats.feasible_candidates;
+    event_pub_.publish(msg);
+    if (!e.published)
+      ROS_WARN_THROTTLE(1.0, "planner: %s plan failed: %s (%s); fallback %s", toString(e.trigger), toString(e.status),
+                        e.message.c_str(), e.fallback.c_str());
+    else if (e.trigger == FsmEvent::Trigger::kEmergency)
+      ROS_WARN("planner: EMERGENCY STOP: %s", e.message.c_str());
+  }
+  if (out.plan) publishPlanMarkers(*out.plan, out.trajectory ? &*out.trajectory : nullptr);
+  else if (out.trajectory) publishPlanMarkers(ReplanResult(), &*out.trajectory);
+  if (out.goal_reached) ROS_INFO("planner: goal reached");
+}
+
+void PlannerServer::publishReference() {
+  const PolynomialTrajectory ref = fsm_->reference();
+  nav_msgs::Path path;
+  path.header.stamp = ros::Time::now();
+  path.header.frame_id = config_.frame_id;
+  const double T = ref.duration();
+  const int n = std::min(20000, std::max(2, int(std::ceil(T / config_.vis_sample_s)) + 1));
+  for (int k = 0; k < n; ++k) {
+    const Eigen::Vector3d p = ref.position(T * k / (n - 1));
+    geometry_msgs::PoseStamped pose;
+    pose.header = path.header;
+    pose.pose.position.x = p.x(), pose.pose.position.y = p.y(), pose.pose.position.z = p.z();
+    pose.pose.orientation.w = 1.0;
+    path.poses.push_back(pose);
+  }
+  reference_pub_.publish(path);
+}
+
+void PlannerServer::publishPlanMarkers(const ReplanResult& plan, const ExecTrajectory* chosen) {
+  const std::string& f = config_.frame_id;
+  auto clear = [&](const std::string& ns) {
+    visualization_msgs::Marker m;
+    m.header.frame_id = f;
+    m.ns = ns;
+    m.action = visualization_msgs::Marker::DELETEALL;
+    return m;
+  };
+  if (chosen) {
+    visualization_msgs::MarkerArray a;
+    a.markers.push_back(clear("trajectory"));
+    const bool braking = chosen->braking;
+    a.markers.push_back(lineStrip(chosen->spline, config_.vis_sample_s, f, "trajectory", 0, 0.12, braking ? 1.f : 0.f,
+                                  braking ? 0.f : 0.8f, 0.f));
+    traj_vis_pub_.publish(a);
+  }
+  if (plan.candidates.empty()) return;
+  visualization_msgs::MarkerArray candidates, guides;
+  candidates.markers.push_back(clear("candidates"));
+  guides.markers.push_back(clear("guide_paths"));
+  for (size_t i = 0; i < plan.candidates.size(); ++i) {
+    const ReplanCandidate& c = plan.candidates[i];
+    const bool ok = std::isfinite(c.selection_cost);
+    candidates.markers.push_back(lineStrip(c.result.spline, config_.vis_sample_s, f, "candidates", int(i), 0.05,
+                                           ok ? 0.2f : 0.9f, ok ? 0.4f : 0.3f, ok ? 1.0f : 0.3f, 0.8f));
+    visualization_msgs::Marker g;
+    g.header.frame_id = f;
+    g.header.stamp = ros::Time::now();
+    g.ns = "guide_paths";
+    g.id = int(i);
+    g.type = visualization_msgs::Marker::LINE_STRIP;
+    g.pose.orientation.w = 1.0;
+    g.scale.x = 0.04;
+    g.color.r = 1.0f, g.color.g = 0.6f, g.color.b = 0.0f, g.color.a = 0.9f;
+    for (const Eigen::Vector3d& p : c.guide) {
+      geometry_msgs::Point pt;
+      pt.x = p.x(), pt.y = p.y(), pt.z = p.z();
+      g.points.push_back(pt);
+    }
+    guides.markers.push_back(g);
+  }
+  candidates_vis_pub_.publish(candidates);
+  guides_vis_pub_.publish(guides);
+}
+
+bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config) {
+  PlannerServer::Config& c = *config;
+  if (!readMappingParams(ros::NodeHandle(nh, "mapping"), &c.mapping)) return false;
+  SimParamReader r(nh);
+  r.skipNamespace("mapping");
+  r.read("frame_id", c.frame_id);
+  r.read("odom_twist_in_world", c.odom_twist_in_world);
+  r.read("goal_height_m", c.goal_height_m);
+  r.read("plan_period_s", c.plan_period_s);
+  r.read("safety_period_s", c.safety_period_s);
+  r.read("odom_timeout_s", c.odom_timeout_s);
+  r.read("vis_sample_s", c.vis_sample_s);
+  std::vector<double> goals;
+  r.read("goals_m", goals);
+  if (goals.size() % 3 != 0) r.errors() << "goals_m must hold x, y, z triples; ";
+  for (size_t i = 0; i + 2 < goals.size(); i += 3) c.goals.emplace_back(goals[i], goals[i + 1], goals[i + 2]);
+
+  ReplanFsm::Config& f = c.fsm;
+  r.read("fsm/takeover_delay_s", f.takeover_delay_s);
+  r.read("fsm/replan_interval_s", f.replan_interval_s);
+  r.read("fsm/safety_clearance_m", f.safety_clearance_m);
+  r.read("fsm/safety_sample_s", f.safety_sample_s);
+  r.read("fsm/brake_acc_mps2", f.brake_acc_mps2);
+  r.read("fsm/emergency_margin_s", f.emergency_margin_s);
+  r.read("fsm/goal_clearance_m", f.goal_clearance_m);
+  r.read("fsm/goal_tolerance_m", f.goal_tolerance_m);
+  r.read("fsm/stopped_speed_mps", f.stopped_speed_mps);
+  r.read("fsm/max_plan_failures", f.max_plan_failures);
+
+  // Limits: the optimiser's are the vehicle's; the reference flies below them (reference_speed_ratio)
+  // so detours around obstacles need no time stretching.
+  double max_vel = f.replanner.optimizer.max_vel_mps, max_acc = f.replanner.optimizer.max_acc_mps2, ratio = 0.75;
+  r.read("max_vel_mps", max_vel);
+  r.read("max_acc_mps2", max_acc);
+  r.read("reference/speed_ratio", ratio);
+  if (!(ratio > 0.0 && ratio <= 1.0)) r.errors() << "reference/speed_ratio must be in (0, 1]; ";
+  f.replanner.optimizer.max_vel_mps = max_vel;
+  f.replanner.optimizer.max_acc_mps2 = max_acc;
+  f.reference.max_vel_mps = ratio * max_vel;
+  f.reference.max_acc_mps2 = ratio * max_acc;
+  f.reference.max_segment_length_m = 3.0;
+  f.reference.cruise_timing = true;
+  r.read("reference/max_segment_length_m", f.reference.max_segment_length_m);
+  f.brake_acc_mps2 = max_acc;
+  r.read("fsm/brake_acc_mps2", f.brake_acc_mps2);
+
+  TopoReplanner::Config& p = f.replanner;
+  p.local_goal_margin_m = 1.0;
+  r.read("replan/horizon_m", p.horizon_m);
+  r.read("replan/reference_clearance_m", p.reference_clearance_m);
+  r.read("replan/local_goal_margin_m", p.local_goal_margin_m);
+  r.read("replan/control_point_spacing_m", p.control_point_spacing_m);
+  r.read("replan/num_threads", p.num_threads);
+  r.read("search/clearance_m", p.search.clearance_m);
+  r.read("search/max_paths", p.search.max_paths);
+  r.read("search/max_length_ratio", p.search.max_length_ratio);
+  r.read("search/max_time_s", p.search.roadmap.max_time_s);
+  r.read("optimizer/clearance_m", p.optimizer.clearance_m);
+  r.read("optimizer/max_iterations", p.optimizer.max_iterations);
+  r.read("optimizer/max_time_s", p.optimizer.max_time_s);
+  r.read("optimizer/lambda_collision", p.optimizer.l2c);
+  p.astar.clearance_m = p.search.clearance_m;
+
+  std::string why;
+  std::string range;
+  if (!(c.plan_period_s > 0.0) || !(c.safety_period_s > 0.0)) range += "plan_period_s and safety_period_s must be positive; ";
+  if (!(c.odom_timeout_s > 0.0)) range += "odom_timeout_s must be positive; ";
+  if (!(c.vis_sample_s > 0.0)) range += "vis_sample_s must be positive; ";
+  if (!std::isfinite(c.goal_height_m)) range += "goal_height_m must be finite; ";
+  if (!f.validate(&why)) range += why + "; ";
+  return r.finish("planner", range);
+}
+
+}  // namespace topo_planner

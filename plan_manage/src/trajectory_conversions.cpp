@@ -1,0 +1,87 @@
+#include "plan_manage/trajectory_conversions.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace topo_planner {
+
+Bspline toMsg(const ExecTrajectory& trajectory, const std::string& frame_id) {
+  Bspline msg;
+  msg.header.frame_id = frame_id;
+  msg.header.stamp = ros::Time(std::max(0.0, trajectory.start_time_s));
+  msg.trajectory_id = trajectory.id;
+  msg.start_time = msg.header.stamp;
+  msg.order = trajectory.spline.degree();
+  msg.knot_span_s = trajectory.spline.knotSpan();
+  const Eigen::MatrixX3d& q = trajectory.spline.controlPoints();
+  msg.control_points.resize(size_t(q.rows()));
+  for (int i = 0; i < q.rows(); ++i) {
+    msg.control_points[size_t(i)].x = q(i, 0);
+    msg.control_points[size_t(i)].y = q(i, 1);
+    msg.control_points[size_t(i)].z = q(i, 2);
+  }
+  return msg;
+}
+
+bool fromMsg(const Bspline& msg, UniformBspline* spline, double* start_time_s, std::string* why) {
+  if (msg.control_points.size() > 100000) {
+    if (why) *why = "more than 100000 control points";
+    return false;
+  }
+  Eigen::MatrixX3d q(msg.control_points.size(), 3);
+  for (size_t i = 0; i < msg.control_points.size(); ++i)
+    q.row(Eigen::Index(i)) << msg.control_points[i].x, msg.control_points[i].y, msg.control_points[i].z;
+  UniformBspline s(q, msg.order, msg.knot_span_s);
+  if (!s.isValid(why)) return false;
+  if (msg.order < 3) {
+    if (why) *why = "order below 3 (no continuous acceleration)";
+    return false;
+  }
+  *spline = s;
+  *start_time_s = msg.start_time.toSec();
+  return true;
+}
+
+PositionCommand toMsg(const Setpoint& sp, const ros::Time& stamp, const std::string& frame_id) {
+  PositionCommand cmd;
+  cmd.header.stamp = stamp;
+  cmd.header.frame_id = frame_id;
+  cmd.position.x = sp.state.position.x();
+  cmd.position.y = sp.state.position.y();
+  cmd.position.z = sp.state.position.z();
+  auto vec = [](const Eigen::Vector3d& v, geometry_msgs::Vector3* m) { m->x = v.x(), m->y = v.y(), m->z = v.z(); };
+  vec(sp.state.velocity, &cmd.velocity);
+  vec(sp.state.acceleration, &cmd.acceleration);
+  vec(sp.state.jerk, &cmd.jerk);
+  cmd.yaw = sp.yaw;
+  cmd.yaw_rate = sp.yaw_rate;
+  cmd.trajectory_id = sp.trajectory_id;
+  return cmd;
+}
+
+visualization_msgs::Marker lineStrip(const UniformBspline& spline, double dt_s, const std::string& frame_id,
+                                     const std::string& ns, int id, double width_m, float r, float g, float b,
+                                     float a) {
+  visualization_msgs::Marker m;
+  m.header.frame_id = frame_id;
+  m.header.stamp = ros::Time::now();
+  m.ns = ns;
+  m.id = id;
+  m.type = visualization_msgs::Marker::LINE_STRIP;
+  m.action = visualization_msgs::Marker::ADD;
+  m.pose.orientation.w = 1.0;
+  m.scale.x = width_m;
+  m.color.r = r, m.color.g = g, m.color.b = b, m.color.a = a;
+  if (!spline.isValid()) return m;
+  const double T = spline.duration();
+  const int n = std::min(5000, std::max(2, int(std::ceil(T / dt_s)) + 1));
+  for (int k = 0; k < n; ++k) {
+    const Eigen::Vector3d p = spline.evaluate(T * k / (n - 1));
+    geometry_msgs::Point pt;
+    pt.x = p.x(), pt.y = p.y(), pt.z = p.z();
+    m.points.push_back(pt);
+  }
+  return m;
+}
+
+}  // namespace topo_planner
