@@ -6,7 +6,7 @@ WS := $(ROOT)/build/ws
 CATKIN_ARGS := -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=Release
 BIN = $(1)/devel/lib/topo_planner
 
-.PHONY: deps build test bench bench-env bench-topo bench-opt bench-replan bench-forest-gen demo test-asan test-tsan clean
+.PHONY: deps build test bench bench-env bench-topo bench-opt bench-replan bench-forest-gen bench-camera bench-flight demo map-demo test-asan test-tsan clean
 
 deps:
 	@bash scripts/install_deps.sh
@@ -30,13 +30,17 @@ test: build
 	cd $(WS) && catkin_make -j$(JOBS) $(CATKIN_ARGS) run_tests
 	@/usr/bin/python3 scripts/test_summary.py $(WS)/build/test_results
 
-bench: bench-env bench-topo bench-replan bench-opt
+bench: bench-env bench-topo bench-replan bench-opt bench-camera
 
 bench-env: build
 	$(call BIN,$(WS))/bench_env $(BENCH_ARGS)
 
 bench-topo: build
 	$(call BIN,$(WS))/bench_topo $(BENCH_ARGS)
+
+# The simulated depth camera at 640 x 480 on one core: rasteriser vs raycast.
+bench-camera: build
+	$(call BIN,$(WS))/bench_camera $(BENCH_ARGS)
 
 # The paper's Table I: table on stdout, results/replan_tasks.csv, results/replan_table1.{md,png}.
 bench-replan: build
@@ -53,9 +57,24 @@ bench-forest-gen: build
 bench-opt: build
 	$(call BIN,$(WS))/bench_opt $(BENCH_ARGS)
 
+# The closed-loop flight: simulator, planner and flight monitor in a seeded medium forest through the
+# scenario's three goals (headless; rviz when $$DISPLAY is set). A line per goal, then the flight
+# report; results/flight_demo{.csv,_events.csv,_map.csv,_reference.csv,_report.json,.png}. Exits
+# non-zero on a collision or a goal not reached.
 demo: build
 	@mkdir -p results
+	WS=$(WS) bash scripts/run_flight.sh --density medium --seed 1 --output-dir $(ROOT)/results --name flight_demo $(DEMO_ARGS)
+
+# Mapping only: a simulated depth camera fused into an empty map (results/map_demo_esdf.png).
+map-demo: build
+	@mkdir -p results
 	$(call BIN,$(WS))/map_demo --map $(ROOT)/test/data/forest0.bt --out $(ROOT)/results
+
+# 20 closed-loop flights (seeds 1..10 at medium and high density, 3 m/s, 3 goals each), one after
+# the other, headless: results/bench_flight.md and a RESULT line. About half an hour; not in CI.
+bench-flight: build
+	@mkdir -p results
+	WS=$(WS) /usr/bin/python3 scripts/bench_flight.py --out $(ROOT)/results $(BENCH_ARGS)
 
 # The tests under AddressSanitizer + UBSan, and under ThreadSanitizer, in their own workspaces.
 # Any sanitizer report stops the test that hit it, so it counts as a failure.

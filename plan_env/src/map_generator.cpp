@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <random>
+#include <sstream>
 
 namespace topo_planner {
 
@@ -14,6 +15,38 @@ const char* toString(ObstacleDensity density) {
   return "?";
 }
 
+const char* toString(ForestObstacle::Kind kind) {
+  switch (kind) {
+    case ForestObstacle::Kind::kPillar: return "pillar";
+    case ForestObstacle::Kind::kBox: return "box";
+    case ForestObstacle::Kind::kWall: return "wall";
+    case ForestObstacle::Kind::kRing: return "ring";
+  }
+  return "?";
+}
+
+bool ForestObstacle::contains(const Eigen::Vector3d& p) const {
+  const Eigen::Vector3d d = p - center;
+  switch (kind) {
+    case Kind::kPillar:
+      return d.head<2>().norm() <= radius_m && d.z() >= 0.0 && d.z() <= height_m;
+    case Kind::kBox:
+      return (d.cwiseAbs().array() <= half_size.array()).all();
+    case Kind::kWall: {
+      const double c = std::cos(yaw_rad), s = std::sin(yaw_rad);
+      const double along = c * d.x() + s * d.y(), across = -s * d.x() + c * d.y();
+      return std::abs(along) <= half_size.x() && std::abs(across) <= half_size.y() && d.z() >= 0.0 &&
+             d.z() <= half_size.z();
+    }
+    case Kind::kRing: {
+      const Eigen::Vector3d axis(std::cos(yaw_rad), std::sin(yaw_rad), 0.0);
+      const double a = d.dot(axis), radial = (d - a * axis).norm() - radius_m;
+      return radial * radial + a * a <= tube_radius_m * tube_radius_m;
+    }
+  }
+  return false;
+}
+
 ForestConfig ForestConfig::preset(ObstacleDensity density) {
   ForestConfig c;
   const double scale = density == ObstacleDensity::kLow ? 0.5 : (density == ObstacleDensity::kMedium ? 1.0 : 1.5);
@@ -22,7 +55,38 @@ ForestConfig ForestConfig::preset(ObstacleDensity density) {
   return c;
 }
 
-int generateForest(const ForestConfig& config, uint32_t seed, OccupancyMap* map) {
+bool ForestConfig::validate(std::string* why) const {
+  std::ostringstream err;
+  auto density_ok = [](double d) { return std::isfinite(d) && d >= 0.0 && d <= 100.0; };
+  auto range_ok = [](double lo, double hi) { return std::isfinite(lo) && std::isfinite(hi) && lo > 0.0 && lo <= hi; };
+  if (!density_ok(pillars_per_m2) || !density_ok(floating_per_m2) || !density_ok(walls_per_m2) ||
+      !density_ok(rings_per_m2))
+    err << "densities must be in [0, 100] per m^2; ";
+  if (!range_ok(pillar_radius_min_m, pillar_radius_max_m)) err << "need 0 < pillar_radius_min_m <= pillar_radius_max_m; ";
+  if (!range_ok(box_size_min_m, box_size_max_m)) err << "need 0 < box_size_min_m <= box_size_max_m; ";
+  if (!(std::isfinite(box_z_min_m) && std::isfinite(box_z_max_m) && box_z_min_m <= box_z_max_m))
+    err << "need box_z_min_m <= box_z_max_m; ";
+  if (!std::isfinite(ground_z_m)) err << "ground_z_m must be finite; ";
+  if (!(std::isfinite(pillar_height_m) && pillar_height_m > 0.0)) err << "pillar_height_m must be positive; ";
+  if (!range_ok(wall_length_min_m, wall_length_max_m)) err << "need 0 < wall_length_min_m <= wall_length_max_m; ";
+  if (!(std::isfinite(wall_thickness_m) && wall_thickness_m > 0.0)) err << "wall_thickness_m must be positive; ";
+  if (!range_ok(ring_radius_min_m, ring_radius_max_m)) err << "need 0 < ring_radius_min_m <= ring_radius_max_m; ";
+  if (!(std::isfinite(ring_tube_radius_m) && ring_tube_radius_m > 0.0)) err << "ring_tube_radius_m must be positive; ";
+  if (!(std::isfinite(ring_z_min_m) && std::isfinite(ring_z_max_m) && ring_z_min_m <= ring_z_max_m))
+    err << "need ring_z_min_m <= ring_z_max_m; ";
+  if (!(std::isfinite(keep_free_radius_m) && keep_free_radius_m >= 0.0)) err << "keep_free_radius_m must be >= 0; ";
+  for (const Eigen::Vector3d& k : keep_free)
+    if (!k.allFinite()) {
+      err << "keep_free points must be finite; ";
+      break;
+    }
+  const std::string s = err.str();
+  if (why) *why = s.empty() ? "" : s.substr(0, s.size() - 2);
+  return s.empty();
+}
+
+int generateForest(const ForestConfig& config, uint32_t seed, OccupancyMap* map,
+                   std::vector<ForestObstacle>* placed_obstacles) {
   const GridGeometry& g = map->geometry();
   const VoxelBox w = g.windowBox();
   Eigen::Vector3i i;
@@ -50,6 +114,15 @@ int generateForest(const ForestConfig& config, uint32_t seed, OccupancyMap* map)
           if (inside(g.centerOf(v))) map->setState(v, VoxelState::kOccupied);
   };
 
+  auto record = [&](const ForestObstacle& o) {
+    if (placed_obstacles) placed_obstacles->push_back(o);
+  };
+  // Walls and rings: every voxel whose centre is inside the shape, within its bounding box.
+  auto fillShape = [&](const ForestObstacle& o, const Eigen::Vector3d& bmin, const Eigen::Vector3d& bmax) {
+    fill(bmin, bmax, [&](const Eigen::Vector3d& p) { return o.contains(p); });
+    record(o);
+  };
+
   int placed = 0;
   const int pillars = int(std::lround(config.pillars_per_m2 * area));
   for (int k = 0; k < pillars; ++k) {
@@ -59,6 +132,12 @@ int generateForest(const ForestConfig& config, uint32_t seed, OccupancyMap* map)
     fill(Eigen::Vector3d(c.x() - r, c.y() - r, config.ground_z_m),
          Eigen::Vector3d(c.x() + r, c.y() + r, config.ground_z_m + config.pillar_height_m),
          [&](const Eigen::Vector3d& p) { return (p - c).head<2>().norm() <= r; });
+    ForestObstacle o;
+    o.kind = ForestObstacle::Kind::kPillar;
+    o.center = c;
+    o.radius_m = r;
+    o.height_m = config.pillar_height_m;
+    record(o);
     ++placed;
   }
   const int boxes = int(std::lround(config.floating_per_m2 * area));
@@ -69,6 +148,39 @@ int generateForest(const ForestConfig& config, uint32_t seed, OccupancyMap* map)
         0.5 * Eigen::Vector3d::NullaryExpr([&] { return config.box_size_min_m + u01(rng) * (config.box_size_max_m - config.box_size_min_m); });
     if (!keepsFree(c, half.norm(), false)) continue;
     fill(c - half, c + half, [](const Eigen::Vector3d&) { return true; });
+    ForestObstacle o;
+    o.kind = ForestObstacle::Kind::kBox;
+    o.center = c;
+    o.half_size = half;
+    record(o);
+    ++placed;
+  }
+  // The optional kinds: a zero density gives a zero count and no random draws (see the header).
+  const int walls = int(std::lround(config.walls_per_m2 * area));
+  for (int k = 0; k < walls; ++k) {
+    ForestObstacle o;
+    o.kind = ForestObstacle::Kind::kWall;
+    o.center = Eigen::Vector3d(ux(rng), uy(rng), config.ground_z_m);
+    const double length = config.wall_length_min_m + u01(rng) * (config.wall_length_max_m - config.wall_length_min_m);
+    o.yaw_rad = M_PI * u01(rng);
+    o.half_size = Eigen::Vector3d(0.5 * length, 0.5 * config.wall_thickness_m, config.pillar_height_m);
+    const double reach = o.half_size.head<2>().norm();
+    if (!keepsFree(o.center, reach, true)) continue;
+    fillShape(o, o.center - Eigen::Vector3d(reach, reach, 0.0),
+              o.center + Eigen::Vector3d(reach, reach, config.pillar_height_m));
+    ++placed;
+  }
+  const int rings = int(std::lround(config.rings_per_m2 * area));
+  for (int k = 0; k < rings; ++k) {
+    ForestObstacle o;
+    o.kind = ForestObstacle::Kind::kRing;
+    o.center = Eigen::Vector3d(ux(rng), uy(rng), config.ring_z_min_m + u01(rng) * (config.ring_z_max_m - config.ring_z_min_m));
+    o.radius_m = config.ring_radius_min_m + u01(rng) * (config.ring_radius_max_m - config.ring_radius_min_m);
+    o.tube_radius_m = config.ring_tube_radius_m;
+    o.yaw_rad = M_PI * u01(rng);
+    const double reach = o.radius_m + o.tube_radius_m;
+    if (!keepsFree(o.center, reach, false)) continue;
+    fillShape(o, o.center - Eigen::Vector3d::Constant(reach), o.center + Eigen::Vector3d::Constant(reach));
     ++placed;
   }
   return placed;

@@ -12,7 +12,7 @@ constexpr double kSpin[4] = {1.0, -1.0, 1.0, -1.0};
 
 Eigen::Vector3d vee(const Eigen::Matrix3d& m) { return Eigen::Vector3d(m(2, 1), m(0, 2), m(1, 0)); }
 
-bool finiteCommand(const PositionCommand& c) {
+bool finiteCommand(const TrackingReference& c) {
   return c.position.allFinite() && c.velocity.allFinite() && c.acceleration.allFinite() && c.jerk.allFinite() &&
          std::isfinite(c.yaw) && std::isfinite(c.yaw_rate);
 }
@@ -51,11 +51,11 @@ Eigen::Vector4d GeometricController::mix(double thrust, const Eigen::Vector3d& m
 }
 
 GeometricController::Output GeometricController::compute(const Quadrotor::State& state,
-                                                         const PositionCommand& command_in) const {
+                                                         const TrackingReference& command_in) const {
   Output out;
-  PositionCommand command = command_in;
+  TrackingReference command = command_in;
   if (!finiteCommand(command)) {  // hold position rather than fly NaN
-    command = PositionCommand();
+    command = TrackingReference();
     command.position = state.position;
     const Eigen::Matrix3d R = state.orientation.toRotationMatrix();
     command.yaw = std::atan2(R(1, 0), R(0, 0));

@@ -21,7 +21,7 @@ struct Sim {
     const int steps = int(std::lround(seconds / kDt));
     for (int k = 0; k < steps; ++k) {
       const double t = t0 + k * kDt;
-      const PositionCommand c = command(t);
+      const TrackingReference c = command(t);
       quad.setRotorSpeedCommand(ctrl.compute(quad.state(), c).rotor_speed);
       quad.step(kDt);
       if (t - t0 >= settle) max_error = std::max(max_error, (quad.state().position - command(t + kDt).position).norm());
@@ -73,7 +73,7 @@ TEST(GeometricController, HoversAndRecoversFromAnOffset) {
   s.orientation = Eigen::Quaterniond(Eigen::AngleAxisd(0.17, Eigen::Vector3d(1, 1, 0).normalized()));
   s.rotor_speed.setConstant(sim.quad.hoverRotorSpeed());
   sim.quad.setState(s);
-  PositionCommand hold;
+  TrackingReference hold;
   hold.position = {0.0, 0.0, 1.0};
   hold.yaw = 0.5;
   sim.run(0.0, 5.0, [&](double) { return hold; });
@@ -89,7 +89,7 @@ TEST(GeometricController, TracksACircle) {
   // Radius 1.5 m at 2 m/s (centripetal acceleration 2.7 m/s^2), yaw along the velocity.
   const double r = 1.5, speed = 2.0, w = speed / r;
   auto circle = [&](double t) {
-    PositionCommand c;
+    TrackingReference c;
     c.position = {r * std::cos(w * t), r * std::sin(w * t), 1.5};
     c.velocity = {-r * w * std::sin(w * t), r * w * std::cos(w * t), 0.0};
     c.acceleration = {-r * w * w * std::cos(w * t), -r * w * w * std::sin(w * t), 0.0};
@@ -115,7 +115,7 @@ TEST(GeometricController, NonFiniteCommandHoldsPosition) {
   s.position = {1.0, 2.0, 3.0};
   s.rotor_speed.setConstant(sim.quad.hoverRotorSpeed());
   sim.quad.setState(s);
-  PositionCommand bad;
+  TrackingReference bad;
   bad.position = {NAN, 0.0, 0.0};
   const GeometricController::Output o = sim.ctrl.compute(sim.quad.state(), bad);
   EXPECT_TRUE(o.saturated);
@@ -126,7 +126,7 @@ TEST(GeometricController, NonFiniteCommandHoldsPosition) {
 
 TEST(GeometricController, TiltAndThrustAreLimited) {
   Sim sim;
-  PositionCommand far;
+  TrackingReference far;
   far.position = {100.0, 0.0, 1.0};  // a huge step: the thrust vector saturates at max_tilt
   const GeometricController::Output o = sim.ctrl.compute(sim.quad.state(), far);
   EXPECT_TRUE(o.saturated);
@@ -140,7 +140,7 @@ TEST(GeometricController, TiltAndThrustAreLimited) {
   bad.min_thrust_ratio = 0.0;
   EXPECT_FALSE(bad.validate(&why));
   // A command far below: the thrust vector is clamped to the minimum, still vertical and finite.
-  PositionCommand below;
+  TrackingReference below;
   below.position = {0.0, 0.0, -100.0};
   const GeometricController::Output low = sim.ctrl.compute(sim.quad.state(), below);
   EXPECT_TRUE(low.rotor_speed.allFinite() && low.moment.allFinite());

@@ -12,8 +12,10 @@
 
 namespace topo_planner {
 
-/// A tracking reference: what the trajectory server sends.
-struct PositionCommand {
+/// A tracking reference: what the trajectory server sends (the content of a
+/// topo_planner/PositionCommand message; the generated message type lives in this namespace too,
+/// hence the other name).
+struct TrackingReference {
   Eigen::Vector3d position = Eigen::Vector3d::Zero();
   Eigen::Vector3d velocity = Eigen::Vector3d::Zero();
   Eigen::Vector3d acceleration = Eigen::Vector3d::Zero();
@@ -46,7 +48,7 @@ class GeometricController {
   GeometricController(const Config& config, const Quadrotor::Config& vehicle);
   /// Control output for the state and command; a command with NaN/inf is replaced by hovering where
   /// the vehicle is (and saturated is set).
-  Output compute(const Quadrotor::State& state, const PositionCommand& command) const;
+  Output compute(const Quadrotor::State& state, const TrackingReference& command) const;
   /// Rotor speeds giving thrust [N] and body moments [N m], clamped to the rotor limits.
   Eigen::Vector4d mix(double thrust, const Eigen::Vector3d& moment) const;
 

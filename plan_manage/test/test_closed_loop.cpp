@@ -1,0 +1,49 @@
+// Rostest of the closed loop (closed_loop.test): the flight monitor flies the planner through the
+// scenario's goals in the simulator; this node waits for its latched FlightResult and checks that
+// every goal was reached without a collision. The wall-clock wait is a guard against a hung
+// simulation (a result that never comes), not a performance budget.
+
+#include <gtest/gtest.h>
+#include <ros/ros.h>
+#include <topo_planner/FlightResult.h>
+
+namespace {
+
+TEST(ClosedLoop, ReachesEveryGoalWithoutCollision) {
+  ros::NodeHandle nh, pnh("~");
+  double wall_timeout_s = 270.0;
+  int goals_expected = 3;
+  pnh.param("wall_timeout_s", wall_timeout_s, wall_timeout_s);
+  pnh.param("goals_expected", goals_expected, goals_expected);
+
+  topo_planner::FlightResultConstPtr result;
+  ros::Subscriber sub = nh.subscribe<topo_planner::FlightResult>(
+      "/flight_monitor/result", 1, [&](const topo_planner::FlightResultConstPtr& msg) { result = msg; });
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(wall_timeout_s);
+  while (!result && ros::ok() && ros::WallTime::now() < deadline) {
+    ros::spinOnce();
+    ros::WallDuration(0.1).sleep();
+  }
+  ASSERT_TRUE(result != nullptr) << "no /flight_monitor/result within " << wall_timeout_s << " s of wall time";
+
+  ROS_INFO("closed loop: %s: %u/%u goals, %u collisions, min clearance %.2f m, speed mean %.2f max %.2f m/s, "
+           "%u replans (%u failed), replanning median %.1f ms p95 %.1f ms, %.1f s, %.1f m",
+           result->success ? "success" : "FAILURE", result->goals_reached, result->goals_total, result->collisions,
+           result->min_clearance_m, result->mean_speed_mps, result->max_speed_mps, result->replans,
+           result->replan_failures, result->replan_ms_median, result->replan_ms_p95, result->duration_s,
+           result->path_length_m);
+  EXPECT_TRUE(result->success) << result->message;
+  EXPECT_EQ(result->goals_total, uint32_t(goals_expected));
+  EXPECT_EQ(result->goals_reached, uint32_t(goals_expected)) << result->message;
+  EXPECT_EQ(result->collisions, 0u) << result->message;
+  EXPECT_GT(result->min_clearance_m, 0.0);
+  EXPECT_GT(result->replans, 0u);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_closed_loop");
+  return RUN_ALL_TESTS();
+}

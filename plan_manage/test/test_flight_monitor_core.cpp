@@ -1,0 +1,448 @@
+// Tests of the flight monitor's ROS-free core: when goals count as reached or timed out, the
+// statistics of a flight against closed-form or brute-force oracles (path length, time-averaged
+// speed, replanning percentiles, collision counts), the trace downsampling, the map columns and
+// the files. Every flight here is synthetic and driven by sample counts, never by the clock.
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "plan_env/synthetic_scene.h"
+#include "plan_env/timing.h"
+#include "plan_manage/flight_monitor_core.h"
+
+namespace topo_planner {
+namespace {
+
+constexpr double kDt = 0.005;  // 200 Hz odometry
+
+OdometrySample sample(double t, const Eigen::Vector3d& p, const Eigen::Vector3d& v, double clearance = 1.0) {
+  OdometrySample s;
+  s.t_s = t;
+  s.position_m = p;
+  s.velocity_mps = v;
+  s.clearance_m = clearance;
+  return s;
+}
+
+std::vector<std::string> readLines(const std::string& path) {
+  std::ifstream in(path);
+  std::vector<std::string> lines;
+  for (std::string l; std::getline(in, l);) lines.push_back(l);
+  return lines;
+}
+
+TEST(FlightRecorder, GoalReachedOnlyWhenCloseAndSlow) {
+  FlightRecorder::Config c;  // 0.5 m, 1 m/s
+  FlightRecorder rec(c, {Eigen::Vector3d(10, 0, 1), Eigen::Vector3d(10, 10, 1)});
+  FlightRecorder::Update u = rec.start(100.0);
+  EXPECT_EQ(u.next_goal, 0);
+  EXPECT_EQ(rec.activeGoal(), 0);
+
+  // Far and slow: nothing.
+  u = rec.addOdometry(sample(100.1, Eigen::Vector3d(5, 0, 1), Eigen::Vector3d(0.1, 0, 0)));
+  EXPECT_EQ(u.goal_reached, -1);
+  // Inside the tolerance but at 2 m/s (a pass): not an arrival.
+  u = rec.addOdometry(sample(100.2, Eigen::Vector3d(9.8, 0, 1), Eigen::Vector3d(2, 0, 0)));
+  EXPECT_EQ(u.goal_reached, -1);
+  // Just outside the tolerance and stopped: not yet.
+  u = rec.addOdometry(sample(100.3, Eigen::Vector3d(10, 0.51, 1), Eigen::Vector3d(0, 0, 0)));
+  EXPECT_EQ(u.goal_reached, -1);
+  // Close and slow: reached; the next goal becomes active at once.
+  u = rec.addOdometry(sample(100.4, Eigen::Vector3d(10, 0.3, 1.2), Eigen::Vector3d(0.5, 0.5, 0)));
+  EXPECT_EQ(u.goal_reached, 0);
+  EXPECT_EQ(u.next_goal, 1);
+  EXPECT_FALSE(u.finished);
+  EXPECT_TRUE(rec.goals()[0].reached);
+  EXPECT_DOUBLE_EQ(rec.goals()[0].reached_t_s, 100.4);
+  EXPECT_DOUBLE_EQ(rec.goals()[1].sent_t_s, 100.4);
+
+  u = rec.addOdometry(sample(120.0, Eigen::Vector3d(10, 10, 1), Eigen::Vector3d::Zero()));
+  EXPECT_EQ(u.goal_reached, 1);
+  EXPECT_EQ(u.next_goal, -1);
+  EXPECT_TRUE(u.finished);
+  EXPECT_EQ(rec.status(), FlightStatus::kSuccess);
+  const FlightSummary s = rec.summary();
+  EXPECT_TRUE(s.success);
+  EXPECT_EQ(s.goals_reached, 2);
+  EXPECT_EQ(s.goals_total, 2);
+  EXPECT_NEAR(s.duration_s, 20.0, 1e-9);  // first goal sent to last goal reached
+
+  // After the end nothing changes.
+  u = rec.addOdometry(sample(121.0, Eigen::Vector3d(0, 0, 1), Eigen::Vector3d(3, 0, 0)));
+  EXPECT_FALSE(u.finished);
+  EXPECT_NEAR(rec.summary().duration_s, 20.0, 1e-9);
+  EXPECT_NEAR(rec.summary().max_speed_mps, 2.0, 1e-12);
+}
+
+TEST(FlightRecorder, ZeroSpeedLimitMeansAnySpeed) {
+  FlightRecorder::Config c;
+  c.goal_max_speed_mps = 0.0;
+  FlightRecorder rec(c, {Eigen::Vector3d(1, 0, 0)});
+  rec.start(0.0);
+  const FlightRecorder::Update u = rec.addOdometry(sample(1.0, Eigen::Vector3d(1.2, 0, 0), Eigen::Vector3d(5, 0, 0)));
+  EXPECT_EQ(u.goal_reached, 0);
+  EXPECT_TRUE(u.finished);
+}
+
+TEST(FlightRecorder, TimeoutEndsTheFlight) {
+  FlightRecorder::Config c;
+  c.goal_timeout_s = 90.0;
+  FlightRecorder rec(c, {Eigen::Vector3d(10, 0, 1), Eigen::Vector3d(-10, 0, 1), Eigen::Vector3d(0, 5, 1)});
+  rec.start(0.0);
+  // Goal 1 reached at t = 30, then goal 2 never: odometry keeps coming far away from it.
+  EXPECT_EQ(rec.addOdometry(sample(30.0, Eigen::Vector3d(10, 0, 1), Eigen::Vector3d::Zero())).goal_reached, 0);
+  FlightRecorder::Update u;
+  int n = 0;
+  for (double t = 30.0 + kDt; !u.finished && n < 100000; t += kDt, ++n)
+    u = rec.addOdometry(sample(t, Eigen::Vector3d(5, 0, 1), Eigen::Vector3d::Zero()));
+  EXPECT_TRUE(u.finished);
+  EXPECT_EQ(u.goal_timed_out, 1);
+  // The first sample past 30 + 90 s ends it.
+  EXPECT_NEAR(rec.lastTime(), 120.0, 2 * kDt);
+  EXPECT_EQ(rec.status(), FlightStatus::kGoalTimeout);
+  const FlightSummary s = rec.summary();
+  EXPECT_FALSE(s.success);
+  EXPECT_EQ(s.goals_reached, 1);
+  EXPECT_TRUE(rec.goals()[1].timed_out);
+  EXPECT_FALSE(rec.goals()[2].sent);
+  EXPECT_NEAR(rec.goals()[1].distance_m, 15.0, 1e-9);
+  EXPECT_NE(s.message.find("goal 2/3 not reached"), std::string::npos) << s.message;
+}
+
+TEST(FlightRecorder, TimeoutWithoutOdometry) {
+  FlightRecorder rec(FlightRecorder::Config(), {Eigen::Vector3d(10, 0, 1)});
+  rec.start(5.0);
+  EXPECT_FALSE(rec.checkTimeout(95.0).finished);  // exactly the limit: still allowed
+  const FlightRecorder::Update u = rec.checkTimeout(95.1);
+  EXPECT_TRUE(u.finished);
+  EXPECT_EQ(u.goal_timed_out, 0);
+  EXPECT_NEAR(rec.summary().duration_s, 90.1, 1e-9);
+}
+
+// Constant acceleration a from rest along x for T seconds: the path is a T^2 / 2 and the time
+// average of the speed a T / 2; trapezoidal integration of a linear speed is exact.
+TEST(FlightRecorder, PathLengthAndSpeedsMatchClosedForm) {
+  const double a = 0.5, T = 10.0;
+  FlightRecorder rec(FlightRecorder::Config(), {Eigen::Vector3d(100, 0, 1)});
+  rec.start(0.0);
+  const int steps = int(std::lround(T / kDt));
+  for (int i = 0; i <= steps; ++i) {
+    const double t = i * kDt;
+    rec.addOdometry(sample(t, Eigen::Vector3d(0.5 * a * t * t, 0, 1), Eigen::Vector3d(a * t, 0, 0)));
+  }
+  const FlightSummary s = rec.summary();
+  EXPECT_NEAR(s.path_length_m, 0.5 * a * T * T, 1e-9);
+  EXPECT_NEAR(s.mean_speed_mps, 0.5 * a * T, 1e-9);
+  EXPECT_NEAR(s.max_speed_mps, a * T, 1e-12);
+  EXPECT_NEAR(s.duration_s, T, 1e-9);
+  EXPECT_NEAR(rec.goals()[0].path_length_m, 0.5 * a * T * T, 1e-9);
+  EXPECT_EQ(rec.status(), FlightStatus::kInProgress);
+  EXPECT_EQ(s.message, "in progress");
+}
+
+// A gap in the odometry (longer than max_sample_gap_s) is neither integrated nor a path jump.
+TEST(FlightRecorder, GapsAndBadSamplesAreNotIntegrated) {
+  FlightRecorder rec(FlightRecorder::Config(), {Eigen::Vector3d(100, 0, 1)});
+  rec.start(0.0);
+  rec.addOdometry(sample(0.0, Eigen::Vector3d(0, 0, 1), Eigen::Vector3d(1, 0, 0)));
+  rec.addOdometry(sample(1.0, Eigen::Vector3d(1, 0, 1), Eigen::Vector3d(1, 0, 0)));
+  rec.addOdometry(sample(5.0, Eigen::Vector3d(20, 0, 1), Eigen::Vector3d(1, 0, 0)));  // 4 s gap
+  rec.addOdometry(sample(6.0, Eigen::Vector3d(21, 0, 1), Eigen::Vector3d(1, 0, 0)));
+  rec.addOdometry(sample(7.0, Eigen::Vector3d(NAN, 0, 1), Eigen::Vector3d(1, 0, 0)));     // ignored
+  rec.addOdometry(sample(8.0, Eigen::Vector3d(22, 0, 1), Eigen::Vector3d(INFINITY, 0, 0)));  // ignored
+  rec.addOdometry(sample(5.5, Eigen::Vector3d(30, 0, 1), Eigen::Vector3d(9, 0, 0)));     // out of order
+  const FlightSummary s = rec.summary();
+  EXPECT_NEAR(s.path_length_m, 2.0, 1e-12);
+  EXPECT_NEAR(s.mean_speed_mps, 1.0, 1e-12);
+  EXPECT_NEAR(s.max_speed_mps, 1.0, 1e-12);
+}
+
+// Percentiles against a sorted copy (nearest rank), counts per goal, and events outside the flight.
+TEST(FlightRecorder, ReplanStatisticsMatchBruteForce) {
+  FlightRecorder rec(FlightRecorder::Config(), {Eigen::Vector3d(10, 0, 1), Eigen::Vector3d(20, 0, 1)});
+  ReplanRecord before;
+  before.total_ms = 1e6;
+  rec.addReplan(before);  // before the start: ignored
+  rec.start(0.0);
+
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> ms(0.5, 40.0);
+  std::vector<double> all;
+  int published[2] = {0, 0}, failed[2] = {0, 0};
+  for (int i = 0; i < 137; ++i) {
+    if (i == 60) rec.addOdometry(sample(10.0, Eigen::Vector3d(10, 0, 1), Eigen::Vector3d::Zero()));  // goal 1
+    const int goal = i < 60 ? 0 : 1;
+    ReplanRecord r;
+    r.t_s = 0.1 * i;
+    r.total_ms = ms(rng);
+    r.published = i % 7 != 3;
+    r.trajectory_id = r.published ? i : -1;
+    (r.published ? published : failed)[goal] += 1;
+    all.push_back(r.total_ms);
+    rec.addReplan(r);
+  }
+  ASSERT_EQ(rec.replans().size(), all.size());
+  EXPECT_EQ(rec.replans()[0].goal_index, 0);
+  EXPECT_EQ(rec.replans().back().goal_index, 1);
+  std::vector<double> sorted = all;
+  std::sort(sorted.begin(), sorted.end());
+  auto rank = [&](double q) { return sorted[size_t(std::lround(q * double(sorted.size() - 1)))]; };
+  const FlightSummary s = rec.summary();
+  EXPECT_DOUBLE_EQ(s.replan_ms_median, rank(0.5));
+  EXPECT_DOUBLE_EQ(s.replan_ms_p95, rank(0.95));
+  EXPECT_DOUBLE_EQ(s.replan_ms_max, sorted.back());
+  EXPECT_EQ(s.replans, published[0] + published[1]);
+  EXPECT_EQ(s.replan_failures, failed[0] + failed[1]);
+  EXPECT_EQ(rec.goals()[0].replans, published[0]);
+  EXPECT_EQ(rec.goals()[0].replan_failures, failed[0]);
+  EXPECT_EQ(rec.goals()[1].replans, published[1]);
+  EXPECT_EQ(rec.goals()[1].replan_failures, failed[1]);
+
+  rec.addOdometry(sample(20.0, Eigen::Vector3d(20, 0, 1), Eigen::Vector3d::Zero()));  // the end
+  ASSERT_TRUE(rec.finished());
+  rec.addReplan(before);  // after the end: ignored
+  EXPECT_EQ(rec.replans().size(), all.size());
+}
+
+TEST(FlightRecorder, NoReplansGiveZeroTimes) {
+  FlightRecorder rec(FlightRecorder::Config(), {Eigen::Vector3d(10, 0, 1)});
+  rec.start(0.0);
+  const FlightSummary s = rec.summary();
+  EXPECT_EQ(s.replan_ms_median, 0.0);
+  EXPECT_EQ(s.replan_ms_p95, 0.0);
+  EXPECT_TRUE(std::isnan(s.min_clearance_m));
+}
+
+// The simulator's counter: values before the start are the baseline; the largest value since,
+// minus it, is the flight's count, attributed to the goal active when it grew.
+TEST(FlightRecorder, SimulatorCollisionsCountFromTheBaseline) {
+  FlightRecorder rec(FlightRecorder::Config(), {Eigen::Vector3d(10, 0, 1), Eigen::Vector3d(20, 0, 1)});
+  rec.addSimCollisionCount(0.0, 1);
+  rec.addSimCollisionCount(0.1, 2);  // baseline 2 (e.g. a previous flight of the same simulator)
+  rec.start(1.0);
+  rec.addSimCollisionCount(1.5, 2);  // the same contact, repeated
+  rec.addSimCollisionCount(2.0, 3);
+  rec.addSimCollisionCount(2.1, 3);
+  rec.addOdometry(sample(3.0, Eigen::Vector3d(10, 0, 1), Eigen::Vector3d::Zero()));  // goal 1 reached
+  rec.addSimCollisionCount(4.0, 5);
+  rec.addSimCollisionCount(4.1, 4);  // out of order: the maximum stays
+  FlightSummary s = rec.summary();
+  EXPECT_EQ(s.sim_collisions, 3);
+  EXPECT_EQ(s.collisions, 3);
+  EXPECT_EQ(rec.goals()[0].sim_collisions, 1);
+  EXPECT_EQ(rec.goals()[1].sim_collisions, 2);
+  rec.addOdometry(sample(5.0, Eigen::Vector3d(20, 0, 1), Eigen::Vector3d::Zero()));
+  EXPECT_EQ(rec.status(), FlightStatus::kCollision);
+  EXPECT_FALSE(rec.summary().success);
+  rec.addSimCollisionCount(6.0, 9);  // after the end: ignored
+  EXPECT_EQ(rec.summary().sim_collisions, 3);
+
+  // No message before the start: the simulator had counted none.
+  FlightRecorder fresh(FlightRecorder::Config(), {Eigen::Vector3d(10, 0, 1)});
+  fresh.start(0.0);
+  fresh.addSimCollisionCount(1.0, 1);
+  EXPECT_EQ(fresh.summary().sim_collisions, 1);
+}
+
+// The own check: a contact begins below collision_radius_m and ends above it plus the release
+// margin, so a vehicle lingering at the threshold counts once.
+TEST(FlightRecorder, ClearanceContactsWithHysteresis) {
+  FlightRecorder::Config c;
+  c.collision_radius_m = 0.2;
+  c.contact_release_m = 0.05;
+  FlightRecorder rec(c, {Eigen::Vector3d(100, 0, 1)});
+  rec.start(0.0);
+  const std::vector<double> clearances = {0.8, 0.5, 0.19, 0.12, 0.21, 0.19, 0.24, 0.3, 0.1, 0.4, NAN, 0.6};
+  for (size_t i = 0; i < clearances.size(); ++i)
+    rec.addOdometry(sample(0.01 * double(i), Eigen::Vector3d(double(i), 0, 1), Eigen::Vector3d::Zero(), clearances[i]));
+  const FlightSummary s = rec.summary();
+  EXPECT_EQ(s.clearance_contacts, 2);
+  EXPECT_EQ(s.collisions, 2);
+  EXPECT_EQ(rec.goals()[0].clearance_contacts, 2);
+  EXPECT_DOUBLE_EQ(s.min_clearance_m, 0.1);
+  EXPECT_DOUBLE_EQ(s.min_clearance_position_m.x(), 8.0);
+  EXPECT_DOUBLE_EQ(rec.goals()[0].min_clearance_m, 0.1);
+}
+
+// 200 Hz in, 20 Hz rows out, each with the goal active then.
+TEST(FlightRecorder, TraceIsDownsampled) {
+  FlightRecorder::Config c;
+  c.trace_period_s = 0.05;
+  FlightRecorder rec(c, {Eigen::Vector3d(1, 0, 1), Eigen::Vector3d(50, 0, 1)});
+  rec.start(3.0);
+  for (int i = 0; i <= 400; ++i) {  // 2 s
+    const double t = 3.0 + i * kDt;
+    const double x = 0.5 * (t - 3.0);
+    rec.addOdometry(sample(t, Eigen::Vector3d(x, 0, 1), Eigen::Vector3d(0.5, 0, 0)));
+  }
+  const std::vector<TraceRow>& rows = rec.trace();
+  ASSERT_EQ(rows.size(), 41u);
+  EXPECT_NEAR(rows.front().t_s, 0.0, 1e-12);
+  for (size_t i = 1; i < rows.size(); ++i) EXPECT_NEAR(rows[i].t_s - rows[i - 1].t_s, 0.05, 1e-6);
+  // The body comes within 0.5 m of goal 1 (x = 1) at x = 0.5, t = 1 s (row 20); later rows belong
+  // to goal 2.
+  EXPECT_EQ(rows[0].goal_index, 0);
+  EXPECT_EQ(rows[19].goal_index, 0);
+  EXPECT_EQ(rows[21].goal_index, 1);
+
+  // Jittered stamps (+-0.4 ms) and a gap: still one row per 50 ms slot, and the grid restarts after
+  // the gap.
+  FlightRecorder jitter(c, {Eigen::Vector3d(100, 0, 1)});
+  jitter.start(0.0);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> noise(-4e-4, 4e-4);
+  for (int i = 0; i <= 2000; ++i) {  // 10 s, with no samples in [4, 6) s
+    const double t = i * kDt + (i > 0 ? noise(rng) : 0.0);
+    if (t >= 4.0 && t < 6.0) continue;
+    jitter.addOdometry(sample(t, Eigen::Vector3d(0, 0, 1), Eigen::Vector3d::Zero()));
+  }
+  const size_t n = jitter.trace().size();
+  EXPECT_GE(n, 160u);  // 8 s of samples at 20 Hz
+  EXPECT_LE(n, 162u);
+  for (size_t i = 1; i < n; ++i) EXPECT_GE(jitter.trace()[i].t_s - jitter.trace()[i - 1].t_s, 0.045);
+}
+
+TEST(FlightRecorder, NoGoalsAndExternalEnds) {
+  FlightRecorder none(FlightRecorder::Config(), {});
+  EXPECT_TRUE(none.start(0.0).finished);
+  EXPECT_EQ(none.status(), FlightStatus::kSuccess);
+
+  FlightRecorder never(FlightRecorder::Config(), {Eigen::Vector3d(1, 0, 0)});
+  never.finish(50.0, FlightStatus::kNoStart, "no map");
+  EXPECT_EQ(never.status(), FlightStatus::kNoStart);
+  EXPECT_FALSE(never.summary().success);
+  EXPECT_EQ(never.summary().message, "no map");
+  EXPECT_EQ(never.summary().duration_s, 0.0);
+  EXPECT_FALSE(never.start(60.0).finished);  // too late to start
+  EXPECT_FALSE(never.started());
+
+  FlightRecorder cut(FlightRecorder::Config(), {Eigen::Vector3d(10, 0, 0)});
+  cut.start(0.0);
+  cut.addOdometry(sample(4.0, Eigen::Vector3d(1, 0, 0), Eigen::Vector3d::Zero()));
+  cut.finish(4.5, FlightStatus::kInterrupted, "stopped");
+  cut.finish(9.0, FlightStatus::kSuccess, "ignored");
+  EXPECT_EQ(cut.status(), FlightStatus::kInterrupted);
+  EXPECT_NEAR(cut.summary().duration_s, 4.5, 1e-12);
+}
+
+TEST(FlightRecorder, LinesAndReport) {
+  FlightRecorder rec(FlightRecorder::Config(), {Eigen::Vector3d(15, 5, 1)});
+  rec.start(10.0);
+  rec.addOdometry(sample(30.0, Eigen::Vector3d(15, 5, 1), Eigen::Vector3d::Zero(), 0.42));
+  const std::string line = formatGoalLine(rec.goals()[0], 1, rec.startTime(), 30.0);
+  EXPECT_NE(line.find("goal 1/1 (15.0, 5.0, 1.0) reached at t=20.0 s after 20.0 s"), std::string::npos) << line;
+  EXPECT_NE(line.find("min clearance 0.42 m"), std::string::npos) << line;
+  const std::string report = formatReport(rec.summary(), "demo");
+  EXPECT_NE(report.find("SUCCESS"), std::string::npos) << report;
+  EXPECT_NE(report.find("goals reached        1/1"), std::string::npos) << report;
+}
+
+// Columns against a brute-force scan of the grid.
+TEST(OccupiedColumns, HighestVoxelPerColumn) {
+  SyntheticScene scene(Eigen::Vector3d(4, 4, 3), 0.1, Eigen::Vector3d(-2, -2, 0));
+  scene.fill([](const Eigen::Vector3d& p) { return std::hypot(p.x() - 1.0, p.y()) <= 0.3 && p.z() < 2.0; });
+  scene.box(Eigen::Vector3d(-1.5, -1.5, 0.5), Eigen::Vector3d(-0.5, -1.0, 1.2));
+  scene.box(Eigen::Vector3d(-1.5, -1.5, 2.0), Eigen::Vector3d(-1.2, -1.2, 2.6));  // above part of the box
+  const std::vector<Eigen::Vector3d> columns = occupiedColumns(*scene.occupancy);
+
+  std::map<std::pair<int, int>, double> oracle;
+  const GridGeometry& g = scene.occupancy->geometry();
+  const VoxelBox w = g.windowBox();
+  Eigen::Vector3i i;
+  for (i.z() = w.min.z(); i.z() <= w.max.z(); ++i.z())
+    for (i.y() = w.min.y(); i.y() <= w.max.y(); ++i.y())
+      for (i.x() = w.min.x(); i.x() <= w.max.x(); ++i.x())
+        if (scene.occupancy->isOccupied(i)) {
+          double& top = oracle.emplace(std::make_pair(i.x(), i.y()), -1e9).first->second;
+          top = std::max(top, (i.z() + 1) * 0.1);
+        }
+  ASSERT_EQ(columns.size(), oracle.size());
+  for (const Eigen::Vector3d& c : columns) {
+    const auto it = oracle.find({int(std::floor(c.x() / 0.1)), int(std::floor(c.y() / 0.1))});
+    ASSERT_NE(it, oracle.end());
+    EXPECT_NEAR(c.z(), it->second, 1e-9);
+  }
+  EXPECT_TRUE(std::is_sorted(columns.begin(), columns.end(), [](const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+    return a.x() < b.x() - 1e-9 || (std::abs(a.x() - b.x()) < 1e-9 && a.y() < b.y());
+  }));
+}
+
+TEST(FlightFiles, WrittenAndReadable) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / "topo_planner_test_flight_files";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string stem = (dir / "f").string();
+
+  FlightRecorder rec(FlightRecorder::Config(), {Eigen::Vector3d(2, 0, 1), Eigen::Vector3d(2, 2, 1)});
+  rec.start(100.0);
+  for (int i = 0; i <= 200; ++i)
+    rec.addOdometry(sample(100.0 + i * kDt, Eigen::Vector3d(0.01 * i, 0, 1), Eigen::Vector3d(0.5, 0, 0), 0.7));
+  ReplanRecord r;
+  r.t_s = 100.5;
+  r.trigger = "new_goal";
+  r.status = "kNoPath, with a comma";
+  r.fallback = "keep_current";
+  r.total_ms = 3.25;
+  rec.addReplan(r);
+  std::string error;
+  ASSERT_TRUE(writeTraceCsv(stem + ".csv", rec.trace(), &error)) << error;
+  ASSERT_TRUE(writeReplanCsv(stem + "_events.csv", rec.replans(), rec.startTime(), &error)) << error;
+  ASSERT_TRUE(writeMapCsv(stem + "_map.csv", {Eigen::Vector3d(1, 2, 3)}, &error)) << error;
+  ReferenceRecord ref;
+  ref.id = 0;
+  ref.t_s = 0.25;
+  ref.points_m = {Eigen::Vector3d(0, 0, 1), Eigen::Vector3d(1, 0, 1)};
+  ASSERT_TRUE(writeReferenceCsv(stem + "_reference.csv", {ref}, &error)) << error;
+  FlightReportInfo info;
+  info.name = "f";
+  info.start_m = Eigen::Vector3d(0, 0, 1);
+  info.scenario["seed"] = "3";
+  info.scenario["density"] = jsonString("medium");
+  const FlightSummary s = rec.summary();
+  ASSERT_TRUE(writeReportJson(stem + "_report.json", s, rec.goals(), rec.startTime(), info, &error)) << error;
+
+  const auto trace = readLines(stem + ".csv");
+  ASSERT_EQ(trace.size(), rec.trace().size() + 1);
+  EXPECT_EQ(trace[0], "t,x,y,z,vx,vy,vz,speed,clearance_m,goal_index");
+  EXPECT_EQ(trace[1].substr(0, 6), "0.000,");
+  const auto events = readLines(stem + "_events.csv");
+  ASSERT_EQ(events.size(), 2u);
+  EXPECT_NE(events[1].find("0.500,"), std::string::npos) << events[1];
+  EXPECT_NE(events[1].find(",\"kNoPath, with a comma\","), std::string::npos) << events[1];
+  EXPECT_EQ(readLines(stem + "_map.csv").size(), 2u);
+  EXPECT_EQ(readLines(stem + "_reference.csv").size(), 3u);
+
+  std::ifstream in(stem + "_report.json");
+  const std::string json((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(json.find("\"success\": false"), std::string::npos);
+  EXPECT_NE(json.find("\"status\": \"kInProgress\""), std::string::npos);
+  EXPECT_NE(json.find("\"seed\": 3"), std::string::npos);
+  EXPECT_NE(json.find("\"density\": \"medium\""), std::string::npos);
+  EXPECT_NE(json.find("\"reached_t_s\": null"), std::string::npos);  // goal 2 not reached
+  EXPECT_NE(json.find("\"min_clearance_m\": 0.7"), std::string::npos);
+
+  EXPECT_FALSE(writeMapCsv((dir / "no" / "such" / "dir.csv").string(), {}, &error));
+  EXPECT_NE(error.find("cannot write"), std::string::npos);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(FlightFiles, JsonValues) {
+  EXPECT_EQ(jsonString("a\"b\\c\nd\x01"), "\"a\\\"b\\\\c\\nd\\u0001\"");
+  EXPECT_EQ(jsonNumber(NAN), "null");
+  EXPECT_EQ(jsonNumber(INFINITY), "null");
+  EXPECT_EQ(jsonNumber(0.1), "0.1");
+  EXPECT_EQ(jsonNumber(-3.0), "-3");
+}
+
+}  // namespace
+}  // namespace topo_planner

@@ -1,0 +1,360 @@
+// Rostest of the simulator's four nodes on a small seeded forest. The cases run in order on one
+// vehicle:
+//   1. the world comes up: latched global cloud, /clock, odometry hovering at the start;
+//   2. bad input (NaN position commands, rotor commands and odometry) is refused: the vehicle keeps
+//      hovering and the nodes keep running;
+//   3. a hover command 1 m above the start: odometry converges there (0.1 m) and stays;
+//   4. the depth camera: 640 x 480 32FC1 frames with finite depths, /camera/pose with the image's
+//      stamp, camera_info;
+//   5. a command into the nearest obstacle: /quadrotor/collision reports the contact, once while the
+//      body stays in it, and again after leaving and re-entering.
+// simulator.test runs them in sim time with the lockstep controller (the loop is closed at every
+// odometry message whatever the load), simulator_realtime.test on the wall clock. Waits are bounded in wall time with
+// generous limits (a loaded 2-core machine).
+
+#include <geometry_msgs/PoseStamped.h>
+#include <gtest/gtest.h>
+#include <nav_msgs/Odometry.h>
+#include <ros/ros.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
+#include <sensor_msgs/PointCloud2.h>
+#include <sensor_msgs/point_cloud2_iterator.h>
+#include <topo_planner/Collision.h>
+#include <topo_planner/PositionCommand.h>
+#include <topo_planner/RotorCommand.h>
+
+#include <Eigen/Core>
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <deque>
+#include <functional>
+#include <mutex>
+#include <vector>
+
+namespace {
+
+// simulator.test sets /sim/start_m to this.
+const Eigen::Vector3d kStart(0.0, 0.0, 1.0);
+
+struct Observer {
+  std::mutex mutex;
+  std::vector<Eigen::Vector3d> obstacles;
+  bool have_cloud = false;
+  nav_msgs::Odometry odom;
+  uint64_t odom_count = 0;
+  sensor_msgs::Image image;
+  uint64_t image_count = 0;
+  sensor_msgs::CameraInfo info;
+  uint64_t info_count = 0;
+  std::deque<ros::Time> pose_stamps;
+  std::vector<topo_planner::Collision> collisions;
+
+  // The command the test streams at 50 Hz (like the trajectory server's 100 Hz).
+  bool streaming = false;
+  topo_planner::PositionCommand command;
+};
+
+Observer obs;
+
+Eigen::Vector3d positionOf(const nav_msgs::Odometry& o) {
+  return Eigen::Vector3d(o.pose.pose.position.x, o.pose.pose.position.y, o.pose.pose.position.z);
+}
+Eigen::Vector3d bodyVelocityOf(const nav_msgs::Odometry& o) {
+  return Eigen::Vector3d(o.twist.twist.linear.x, o.twist.twist.linear.y, o.twist.twist.linear.z);
+}
+
+nav_msgs::Odometry latestOdom() {
+  std::lock_guard<std::mutex> lock(obs.mutex);
+  return obs.odom;
+}
+
+// Polls pred every 10 ms of wall time (callbacks run on the AsyncSpinner) for at most limit_s.
+bool waitFor(const std::function<bool()>& pred, double limit_s) {
+  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(limit_s);
+  while (ros::ok() && ros::WallTime::now() < end) {
+    if (pred()) return true;
+    ros::WallDuration(0.01).sleep();
+  }
+  return pred();
+}
+
+void stream(const Eigen::Vector3d& position) {
+  std::lock_guard<std::mutex> lock(obs.mutex);
+  obs.command = topo_planner::PositionCommand();
+  obs.command.header.frame_id = "world";
+  obs.command.position.x = position.x();
+  obs.command.position.y = position.y();
+  obs.command.position.z = position.z();
+  obs.command.trajectory_id = -1;
+  obs.streaming = true;
+}
+
+void cloudCallback(const sensor_msgs::PointCloud2ConstPtr& msg) {
+  std::vector<Eigen::Vector3d> points;
+  if (msg->width * msg->height > 0) {
+    sensor_msgs::PointCloud2ConstIterator<float> x(*msg, "x"), y(*msg, "y"), z(*msg, "z");
+    for (; x != x.end(); ++x, ++y, ++z) points.emplace_back(*x, *y, *z);
+  }
+  std::lock_guard<std::mutex> lock(obs.mutex);
+  obs.obstacles = points;
+  obs.have_cloud = true;
+}
+void odomCallback(const nav_msgs::OdometryConstPtr& msg) {
+  std::lock_guard<std::mutex> lock(obs.mutex);
+  obs.odom = *msg;
+  ++obs.odom_count;
+}
+void imageCallback(const sensor_msgs::ImageConstPtr& msg) {
+  std::lock_guard<std::mutex> lock(obs.mutex);
+  obs.image = *msg;
+  ++obs.image_count;
+}
+void infoCallback(const sensor_msgs::CameraInfoConstPtr& msg) {
+  std::lock_guard<std::mutex> lock(obs.mutex);
+  obs.info = *msg;
+  ++obs.info_count;
+}
+void poseCallback(const geometry_msgs::PoseStampedConstPtr& msg) {
+  std::lock_guard<std::mutex> lock(obs.mutex);
+  obs.pose_stamps.push_back(msg->header.stamp);
+  if (obs.pose_stamps.size() > 200) obs.pose_stamps.pop_front();
+}
+void collisionCallback(const topo_planner::CollisionConstPtr& msg) {
+  std::lock_guard<std::mutex> lock(obs.mutex);
+  obs.collisions.push_back(*msg);
+}
+
+class Simulator : public testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    nh_ = new ros::NodeHandle;
+    subs_.push_back(nh_->subscribe("/map_generator/global_cloud", 1, &cloudCallback));
+    subs_.push_back(nh_->subscribe("/odom", 10, &odomCallback));
+    subs_.push_back(nh_->subscribe("/camera/depth/image_rect_raw", 2, &imageCallback));
+    subs_.push_back(nh_->subscribe("/camera/depth/camera_info", 2, &infoCallback));
+    subs_.push_back(nh_->subscribe("/camera/pose", 50, &poseCallback));
+    subs_.push_back(nh_->subscribe("/quadrotor/collision", 10, &collisionCallback));
+    command_pub_ = nh_->advertise<topo_planner::PositionCommand>("/planning/position_cmd", 10);
+    rotor_pub_ = nh_->advertise<topo_planner::RotorCommand>("/controller/rotor_command", 10);
+    odom_pub_ = nh_->advertise<nav_msgs::Odometry>("/odom", 10);
+    stream_timer_ = nh_->createWallTimer(ros::WallDuration(0.02), &streamCallback);
+    spinner_ = new ros::AsyncSpinner(2);
+    spinner_->start();
+  }
+
+  // Everything ROS goes before main() returns (static destructors would run after ros::shutdown).
+  static void TearDownTestSuite() {
+    spinner_->stop();
+    delete spinner_;
+    stream_timer_.stop();
+    stream_timer_ = ros::WallTimer();
+    subs_.clear();
+    command_pub_.shutdown();
+    rotor_pub_.shutdown();
+    odom_pub_.shutdown();
+    delete nh_;
+  }
+
+  static void streamCallback(const ros::WallTimerEvent&) {
+    topo_planner::PositionCommand c;
+    {
+      std::lock_guard<std::mutex> lock(obs.mutex);
+      if (!obs.streaming) return;
+      c = obs.command;
+    }
+    c.header.stamp = ros::Time::now();
+    command_pub_.publish(c);
+  }
+
+  static ros::NodeHandle* nh_;
+  static std::vector<ros::Subscriber> subs_;
+  static ros::Publisher command_pub_, rotor_pub_, odom_pub_;
+  static ros::WallTimer stream_timer_;
+  static ros::AsyncSpinner* spinner_;
+};
+
+ros::NodeHandle* Simulator::nh_ = nullptr;
+std::vector<ros::Subscriber> Simulator::subs_;
+ros::Publisher Simulator::command_pub_, Simulator::rotor_pub_, Simulator::odom_pub_;
+ros::WallTimer Simulator::stream_timer_;
+ros::AsyncSpinner* Simulator::spinner_ = nullptr;
+
+TEST_F(Simulator, WorldComesUpHovering) {
+  ASSERT_TRUE(waitFor(
+      [] {
+        std::lock_guard<std::mutex> l(obs.mutex);
+        return obs.have_cloud;
+      },
+      30.0))
+      << "no global cloud";
+  {
+    std::lock_guard<std::mutex> l(obs.mutex);
+    EXPECT_GT(obs.obstacles.size(), 1000u);
+  }
+  ASSERT_TRUE(waitFor(
+      [] {
+        std::lock_guard<std::mutex> l(obs.mutex);
+        return obs.odom_count > 50;
+      },
+      30.0))
+      << "no odometry";
+  const nav_msgs::Odometry o = latestOdom();
+  EXPECT_EQ(o.header.frame_id, "world");
+  EXPECT_EQ(o.child_frame_id, "base_link");
+  EXPECT_LT((positionOf(o) - kStart).norm(), 0.05);
+  EXPECT_GT(ros::Time::now().toSec(), 1.0);  // /clock drives the time (starts at clock_start_s)
+}
+
+TEST_F(Simulator, BadInputIsRefused) {
+  topo_planner::PositionCommand bad;
+  bad.position.x = NAN;
+  topo_planner::RotorCommand bad_rotor;
+  bad_rotor.rotor_speed_radps = {NAN, 1.0, -5.0, INFINITY};
+  nav_msgs::Odometry bad_odom;  // NaN pose, and a zero quaternion: the controller and camera refuse it
+  bad_odom.header.frame_id = "world";
+  bad_odom.pose.pose.position.x = NAN;
+  for (int k = 0; k < 5; ++k) {
+    command_pub_.publish(bad);
+    rotor_pub_.publish(bad_rotor);
+    odom_pub_.publish(bad_odom);
+    ros::WallDuration(0.05).sleep();
+  }
+  auto odomCount = [] {
+    std::lock_guard<std::mutex> l(obs.mutex);
+    return obs.odom_count;
+  };
+  const uint64_t before = odomCount();
+  ASSERT_TRUE(waitFor([&] { return odomCount() > before + 100; }, 20.0)) << "odometry stopped";
+  const nav_msgs::Odometry o = latestOdom();
+  EXPECT_LT((positionOf(o) - kStart).norm(), 0.2) << positionOf(o).transpose();
+  EXPECT_TRUE(positionOf(o).allFinite());
+}
+
+TEST_F(Simulator, HoversAtTheCommandedPoint) {
+  const Eigen::Vector3d target = kStart + Eigen::Vector3d(0.0, 0.0, 1.0);
+  stream(target);
+  // Converged: within 0.1 m and nearly at rest, and still so a second (wall) later.
+  auto settled = [&] {
+    const nav_msgs::Odometry o = latestOdom();
+    return (positionOf(o) - target).norm() < 0.1 && bodyVelocityOf(o).norm() < 0.1;
+  };
+  ASSERT_TRUE(waitFor(settled, 30.0)) << "at " << positionOf(latestOdom()).transpose();
+  ros::WallDuration(1.0).sleep();
+  EXPECT_TRUE(settled()) << "at " << positionOf(latestOdom()).transpose();
+  EXPECT_LT((positionOf(latestOdom()) - target).norm(), 0.05);
+}
+
+TEST_F(Simulator, CameraPublishesDepthFrames) {
+  uint64_t first;
+  {
+    std::lock_guard<std::mutex> l(obs.mutex);
+    first = obs.image_count;
+  }
+  ASSERT_TRUE(waitFor(
+      [&] {
+        std::lock_guard<std::mutex> l(obs.mutex);
+        return obs.image_count >= first + 3;
+      },
+      30.0))
+      << "fewer than 3 depth images";
+  sensor_msgs::Image image;
+  sensor_msgs::CameraInfo info;
+  std::deque<ros::Time> pose_stamps;
+  {
+    std::lock_guard<std::mutex> l(obs.mutex);
+    image = obs.image;
+    info = obs.info;
+    pose_stamps = obs.pose_stamps;
+  }
+  EXPECT_EQ(image.width, 640u);
+  EXPECT_EQ(image.height, 480u);
+  EXPECT_EQ(image.encoding, "32FC1");
+  EXPECT_EQ(image.header.frame_id, "camera_optical");
+  ASSERT_EQ(image.step, 640u * 4u);
+  ASSERT_EQ(image.data.size(), size_t(image.step) * image.height);
+  size_t finite = 0;
+  float nearest = INFINITY;
+  for (size_t i = 0; i < size_t(image.width) * image.height; ++i) {
+    float d;
+    std::memcpy(&d, image.data.data() + 4 * i, 4);
+    EXPECT_FALSE(d < 0.0f);
+    if (std::isfinite(d)) {
+      ++finite;
+      nearest = std::min(nearest, d);
+    }
+  }
+  EXPECT_GT(finite, 1000u) << "the seeded forest should be in view";
+  EXPECT_GE(nearest, 0.1f);
+  EXPECT_LE(nearest, 6.0f);
+  // The pose of the image's stamp was published with it.
+  EXPECT_NE(std::find(pose_stamps.begin(), pose_stamps.end(), image.header.stamp), pose_stamps.end());
+  EXPECT_EQ(info.width, 640u);
+  EXPECT_NEAR(info.K[0], 387.229248046875, 1e-9);
+}
+
+TEST_F(Simulator, FlyingIntoAnObstacleIsACollision) {
+  const Eigen::Vector3d here = positionOf(latestOdom());
+  Eigen::Vector3d target;
+  double best = INFINITY;
+  {
+    std::lock_guard<std::mutex> l(obs.mutex);
+    ASSERT_TRUE(obs.collisions.empty()) << "a collision before flying into anything";
+    for (const Eigen::Vector3d& p : obs.obstacles)
+      if (std::abs(p.z() - here.z()) < 0.3 && (p - here).norm() < best) {
+        best = (p - here).norm();
+        target = p;
+      }
+  }
+  ASSERT_TRUE(std::isfinite(best)) << "no obstacle at the flight height";
+  stream(target);
+  ASSERT_TRUE(waitFor(
+      [] {
+        std::lock_guard<std::mutex> l(obs.mutex);
+        return !obs.collisions.empty();
+      },
+      30.0))
+      << "no collision flying from " << here.transpose() << " into the obstacle at " << target.transpose();
+  topo_planner::Collision c;
+  {
+    std::lock_guard<std::mutex> l(obs.mutex);
+    c = obs.collisions.front();
+  }
+  EXPECT_EQ(c.count, 1u);
+  EXPECT_LT(c.clearance_m, 0.15);
+  EXPECT_GE(c.clearance_m, 0.0);
+  EXPECT_GT(c.position.z, 0.5);  // the obstacle, not the ground
+  const Eigen::Vector3d at(c.position.x, c.position.y, c.position.z);
+  EXPECT_LT((at - target).norm(), best + 0.2);
+
+  // Staying in contact counts once; leaving and entering again counts again.
+  stream(here);
+  ASSERT_TRUE(waitFor([&] { return (positionOf(latestOdom()) - here).norm() < 0.1; }, 30.0)) << "did not fly back";
+  {
+    std::lock_guard<std::mutex> l(obs.mutex);
+    EXPECT_EQ(obs.collisions.size(), 1u);
+  }
+  stream(target);
+  ASSERT_TRUE(waitFor(
+      [] {
+        std::lock_guard<std::mutex> l(obs.mutex);
+        return obs.collisions.size() >= 2;
+      },
+      30.0))
+      << "no second collision";
+  {
+    std::lock_guard<std::mutex> l(obs.mutex);
+    EXPECT_EQ(obs.collisions[1].count, 2u);
+  }
+  stream(here);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_simulator");
+  ros::NodeHandle nh;  // keeps the node up across the cases
+  return RUN_ALL_TESTS();
+}
