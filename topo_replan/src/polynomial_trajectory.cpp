@@ -96,14 +96,17 @@ FlatState PolynomialTrajectory::state(double t) const {
   return s;
 }
 
+// Both samplers take at most about 100000 samples (longer trajectories get a coarser step).
 double PolynomialTrajectory::maxSpeed(double dt_s) const {
   double m = 0.0;
+  dt_s = std::max(dt_s, duration() * 1e-5);
   for (double t = 0.0; t <= duration() + 1e-12; t += dt_s) m = std::max(m, velocity(t).norm());
   return std::max(m, velocity(duration()).norm());
 }
 
 double PolynomialTrajectory::maxAcceleration(double dt_s) const {
   double m = 0.0;
+  dt_s = std::max(dt_s, duration() * 1e-5);
   for (double t = 0.0; t <= duration() + 1e-12; t += dt_s) m = std::max(m, acceleration(t).norm());
   return std::max(m, acceleration(duration()).norm());
 }
@@ -203,7 +206,12 @@ TrajectoryStatus referenceTrajectory(const std::vector<Eigen::Vector3d>& waypoin
   for (int k = 0; k <= config.max_rescales; ++k) {
     const TrajectoryStatus s = minimumSnapTrajectory(points, durations, start, end, out);
     if (s != TrajectoryStatus::kSuccess) return s;
-    const double vr = out->maxSpeed() / v, ar = out->maxAcceleration() / a;
+    // The limits hold, or are broken only as much as the fixed start or end state breaks them
+    // (stretching time cannot change those: a vehicle braking harder than the reference's limit
+    // starts a reference that way).
+    const double v_allowed = std::max({v, start.velocity.norm(), end.velocity.norm()});
+    const double a_allowed = std::max({a, start.acceleration.norm(), end.acceleration.norm()});
+    const double vr = out->maxSpeed() / v_allowed, ar = out->maxAcceleration() / a_allowed;
     if (vr <= 1.0 + 1e-6 && ar <= 1.0 + 1e-6) return TrajectoryStatus::kSuccess;
     // Stretching time by f divides speeds by f and accelerations by f^2 (exactly so when the end
     // derivatives are zero; otherwise the loop iterates).

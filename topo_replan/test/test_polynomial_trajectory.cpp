@@ -102,5 +102,23 @@ TEST(ReferenceTrajectory, InvalidInputs) {
   EXPECT_TRUE(PolynomialTrajectory().derivative(1.0, 0).isZero());
 }
 
+// A vehicle braking harder than the reference's limit: the fixed start acceleration cannot be
+// stretched away, and must not make the time scaling run away (it did: 2^30 longer, then a hang).
+TEST(ReferenceTrajectory, StartBeyondTheLimitsTerminates) {
+  FlatState start = FlatState::atRest({0, 0, 1});
+  start.velocity = Eigen::Vector3d(0.8, 0, 0);
+  start.acceleration = Eigen::Vector3d(-2.4, 0, 0);
+  ReferenceConfig config;
+  config.max_vel_mps = 2.25;
+  config.max_acc_mps2 = 1.875;
+  config.max_segment_length_m = 3.0;
+  config.cruise_timing = true;
+  PolynomialTrajectory ref;
+  ASSERT_EQ(referenceTrajectory({start.position, {30, -9, 1}}, start, FlatState::atRest({30, -9, 1}), config, &ref),
+            TrajectoryStatus::kSuccess);
+  EXPECT_LT(ref.duration(), 60.0);
+  EXPECT_LE(ref.maxAcceleration(), 2.4 * (1 + 1e-6));
+}
+
 }  // namespace
 }  // namespace topo_planner
