@@ -132,7 +132,7 @@ def plot(directory, name, out):
     hits = [(num(r['x']), num(r['y'])) for r in trace if num(r['clearance_m']) < radius]
     if hits:
         p = np.array(hits)
-        ax.scatter(p[:, 0], p[:, 1], s=30, color='red', zorder=7, label=f'contact (clearance < {radius:.2f} m)')
+        ax.scatter(p[:, 0], p[:, 1], s=16, color='red', zorder=7, label=f'contact (clearance < {radius:.2f} m)')
 
     # Replanning points: where each planned trajectory starts; failed calls in red, emergency stops
     # (a braking trajectory) in orange.

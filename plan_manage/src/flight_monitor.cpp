@@ -95,7 +95,7 @@ bool readFlightMonitorParams(const ros::NodeHandle& pnh, FlightMonitor::Config* 
     ROS_ERROR("flight_monitor: invalid scenario: %s", why.c_str());
     return false;
   }
-  SimParamReader r(pnh);
+  ParamReader r(pnh);
   std::vector<double> goals;
   r.read("goals_m", goals);
   if (!goals.empty()) {
@@ -414,6 +414,7 @@ void FlightMonitor::writeFiles(const FlightSummary& summary) const {
   info.start_m = config_.start_m;
   info.map_resolution_m = config_.truth.resolution_m;
   info.map_occupied_voxels = truth_ ? truth_->numOccupied() : 0;
+  info.collision_radius_m = config_.recorder.collision_radius_m;
   info.scenario = config_.scenario;
 
   std::string error;

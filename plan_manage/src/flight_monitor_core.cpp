@@ -453,6 +453,7 @@ bool writeReportJson(const std::string& path, const FlightSummary& s, const std:
     << "  \"start_m\": " << jsonVector(info.start_m) << ",\n"
     << "  \"map_resolution_m\": " << jsonNumber(info.map_resolution_m) << ",\n"
     << "  \"map_occupied_voxels\": " << info.map_occupied_voxels << ",\n"
+    << "  \"collision_radius_m\": " << jsonNumber(info.collision_radius_m) << ",\n"
     << "  \"scenario\": {";
   bool first = true;
   for (const auto& [key, value] : info.scenario) {

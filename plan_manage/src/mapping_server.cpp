@@ -8,6 +8,7 @@
 #include <utility>
 
 #include "plan_env/map_io.h"
+#include "uav_sim/ros/param_reader.h"
 
 namespace topo_planner {
 
@@ -25,53 +26,6 @@ bool isRigid(const Eigen::Isometry3d& T) {
 
 bool finiteNonNegative(double x) { return std::isfinite(x) && x >= 0.0; }
 bool finitePositive(double x) { return std::isfinite(x) && x > 0.0; }
-
-// Parameter reading with the struct value as the default, recording what was read (to flag
-// typos) and what had the wrong type (nh.param would silently fall back to the default).
-class ParamReader {
- public:
-  explicit ParamReader(const ros::NodeHandle& nh) : nh_(nh) {}
-
-  template <typename T>
-  void read(const std::string& name, T& value) {
-    known_.insert(nh_.resolveName(name));
-    const T default_value = value;
-    nh_.param(name, value, default_value);  // the ROS default is the struct default
-    T probe;
-    if (nh_.hasParam(name) && !nh_.getParam(name, probe)) {
-      errors_ << name << " has the wrong type; ";
-      value = default_value;
-    }
-  }
-
-  void readVector3(const std::string& name, Eigen::Vector3d& v) {
-    std::vector<double> d{v.x(), v.y(), v.z()};
-    read(name, d);
-    if (d.size() != 3) {
-      errors_ << name << " must be a list of 3 numbers; ";
-      return;
-    }
-    v = Eigen::Vector3d(d[0], d[1], d[2]);
-  }
-
-  bool has(const std::string& name) const { return nh_.hasParam(name); }
-  std::ostringstream& errors() { return errors_; }
-
-  /// Private parameters that no read() asked for.
-  std::vector<std::string> unknownParams() const {
-    std::vector<std::string> all, unknown;
-    if (!nh_.getParamNames(all)) return unknown;
-    const std::string prefix = nh_.getNamespace() + "/";
-    for (const std::string& p : all)
-      if (p.compare(0, prefix.size(), prefix) == 0 && !known_.count(p)) unknown.push_back(p);
-    return unknown;
-  }
-
- private:
-  const ros::NodeHandle& nh_;
-  std::set<std::string> known_;
-  std::ostringstream errors_;
-};
 
 void readExtrinsic(ParamReader& r, Eigen::Isometry3d* T) {
   const std::string t_name = "extrinsic/translation_m", q_name = "extrinsic/quaternion_xyzw",
@@ -229,20 +183,11 @@ bool readMappingParams(const ros::NodeHandle& nh, MappingServer::Config* config)
   r.read("publish/esdf_slice_height_m", c.esdf_slice_height_m);
   r.read("status_period_s", c.status_period_s);
 
-  for (const std::string& p : r.unknownParams()) ROS_WARN("mapping: ignoring unknown parameter %s (typo?)", p.c_str());
-
-  // Report the type errors and the range errors together (a field with the wrong type kept its
-  // default, so the range check of the rest is still meaningful).
+  // The type errors and the range errors are reported together (a field with the wrong type kept
+  // its default, so the range check of the rest is still meaningful).
   std::string range_errors;
   c.validate(&range_errors);
-  std::string why = r.errors().str() + range_errors;
-  if (!range_errors.empty()) why += "; ";
-  if (!why.empty()) {
-    why = why.substr(0, why.size() - 2);
-    ROS_ERROR("mapping: invalid parameters in %s: %s", nh.getNamespace().c_str(), why.c_str());
-    return false;
-  }
-  return true;
+  return r.finish("mapping", range_errors);
 }
 
 // ---------------------------------------------------------------------------------------------

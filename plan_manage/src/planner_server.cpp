@@ -242,7 +242,7 @@ void PlannerServer::publishPlanMarkers(const ReplanResult& plan, const ExecTraje
 bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config) {
   PlannerServer::Config& c = *config;
   if (!readMappingParams(ros::NodeHandle(nh, "mapping"), &c.mapping)) return false;
-  SimParamReader r(nh);
+  ParamReader r(nh);
   r.skipNamespace("mapping");
   r.read("frame_id", c.frame_id);
   r.read("odom_twist_in_world", c.odom_twist_in_world);

@@ -77,7 +77,7 @@ void TrajServer::timerCallback(const ros::TimerEvent&) {
 
 bool readTrajServerParams(const ros::NodeHandle& nh, TrajServer::Config* config) {
   TrajServer::Config& c = *config;
-  SimParamReader r(nh);
+  ParamReader r(nh);
   r.read("frame_id", c.frame_id);
   r.read("rate_hz", c.rate_hz);
   r.read("max_yaw_rate_radps", c.generator.max_yaw_rate_radps);

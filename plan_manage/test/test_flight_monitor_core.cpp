@@ -430,6 +430,7 @@ TEST(FlightFiles, WrittenAndReadable) {
   EXPECT_NE(json.find("\"density\": \"medium\""), std::string::npos);
   EXPECT_NE(json.find("\"reached_t_s\": null"), std::string::npos);  // goal 2 not reached
   EXPECT_NE(json.find("\"min_clearance_m\": 0.7"), std::string::npos);
+  EXPECT_NE(json.find("\"collision_radius_m\": 0.15"), std::string::npos);
 
   EXPECT_FALSE(writeMapCsv((dir / "no" / "such" / "dir.csv").string(), {}, &error));
   EXPECT_NE(error.find("cannot write"), std::string::npos);

@@ -244,6 +244,7 @@ struct FlightReportInfo {
   Eigen::Vector3d start_m = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
   double map_resolution_m = 0.1;
   size_t map_occupied_voxels = 0;
+  double collision_radius_m = 0.15;  ///< of the own contact check (FlightRecorder::Config)
   std::map<std::string, std::string> scenario;
 };
 bool writeReportJson(const std::string& path, const FlightSummary& summary, const std::vector<GoalRecord>& goals,

@@ -24,7 +24,7 @@ bool ControllerServer::Config::validate(std::string* why) const {
 
 bool readControllerParams(const ros::NodeHandle& pnh, ControllerServer::Config* config) {
   ControllerServer::Config& c = *config;
-  SimParamReader r(pnh);
+  ParamReader r(pnh);
   r.readVector3("position_gain", c.gains.position_gain);
   r.readVector3("velocity_gain", c.gains.velocity_gain);
   r.readVector3("attitude_gain", c.gains.attitude_gain);

@@ -61,7 +61,7 @@ bool DepthCameraServer::Config::validate(std::string* why) const {
 
 bool readDepthCameraParams(const ros::NodeHandle& pnh, DepthCameraServer::Config* config) {
   DepthCameraServer::Config& c = *config;
-  SimParamReader r(pnh);
+  ParamReader r(pnh);
   std::string scenario_error;
   if (!readSimScenario(&c.scenario, &scenario_error)) r.errors() << scenario_error << "; ";
   r.read("rate_hz", c.rate_hz);

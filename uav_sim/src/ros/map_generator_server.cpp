@@ -41,7 +41,7 @@ bool MapGeneratorServer::Config::validate(std::string* why) const {
 
 bool readMapGeneratorParams(const ros::NodeHandle& nh, MapGeneratorServer::Config* config) {
   MapGeneratorServer::Config& c = *config;
-  SimParamReader r(nh);
+  ParamReader r(nh);
   std::string scenario_error;
   if (!readSimScenario(&c.scenario, &scenario_error)) r.errors() << scenario_error << "; ";
   r.read("map_file", c.map_file);

@@ -87,7 +87,7 @@ bool QuadrotorSim::Config::validate(std::string* why) const {
 
 bool readQuadrotorSimParams(const ros::NodeHandle& pnh, QuadrotorSim::Config* config) {
   QuadrotorSim::Config& c = *config;
-  SimParamReader r(pnh);
+  ParamReader r(pnh);
   std::string scenario_error;
   if (!readSimScenario(&c.scenario, &scenario_error)) r.errors() << scenario_error << "; ";
   readVehicleParams(r, &c.vehicle);

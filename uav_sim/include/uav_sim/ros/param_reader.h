@@ -1,5 +1,5 @@
 #pragma once
-// Parameter reading of the simulator nodes (the readXParams() functions): the config struct's value
+// Parameter reading of every node (the readXParams() functions): the config struct's value
 // is the ROS default, a parameter of the wrong type is an error (nh.param would silently fall back to
 // the default), and private parameters nobody asked for are reported as likely typos.
 
@@ -19,9 +19,9 @@
 
 namespace topo_planner {
 
-class SimParamReader {
+class ParamReader {
  public:
-  explicit SimParamReader(const ros::NodeHandle& nh) : nh_(nh) {}
+  explicit ParamReader(const ros::NodeHandle& nh) : nh_(nh) {}
 
   template <typename T>
   void read(const std::string& name, T& value) {
@@ -111,7 +111,7 @@ class SimParamReader {
 
 /// Reads vehicle/* (the airframe: config/vehicle.yaml, loaded into both the simulator and the
 /// controller so that the controller's model is the simulated vehicle unless told otherwise).
-inline void readVehicleParams(SimParamReader& r, Quadrotor::Config* vehicle) {
+inline void readVehicleParams(ParamReader& r, Quadrotor::Config* vehicle) {
   Quadrotor::Config& v = *vehicle;
   r.read("vehicle/mass_kg", v.mass_kg);
   r.readVector3("vehicle/inertia_kgm2", v.inertia_kgm2);
