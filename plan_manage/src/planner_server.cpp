@@ -258,6 +258,7 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
 
   ReplanFsm::Config& f = c.fsm;
   r.read("fsm/takeover_delay_s", f.takeover_delay_s);
+  r.read("fsm/max_takeover_delay_s", f.max_takeover_delay_s);
   r.read("fsm/replan_interval_s", f.replan_interval_s);
   r.read("fsm/safety_clearance_m", f.safety_clearance_m);
   r.read("fsm/safety_sample_s", f.safety_sample_s);

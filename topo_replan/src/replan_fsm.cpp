@@ -50,6 +50,8 @@ bool ReplanFsm::Config::validate(std::string* why) const {
   if (!(reference.max_vel_mps > 0.0) || !(reference.max_acc_mps2 > 0.0) || reference.max_rescales < 1)
     return bad("reference limits must be positive");
   if (!(takeover_delay_s >= 0.0) || !(takeover_delay_s < 5.0)) return bad("takeover_delay_s must be in [0, 5)");
+  if (!(max_takeover_delay_s >= takeover_delay_s) || !(max_takeover_delay_s < 5.0))
+    return bad("max_takeover_delay_s must be in [takeover_delay_s, 5)");
   if (!(replan_interval_s > 0.0)) return bad("replan_interval_s must be positive");
   if (!(safety_clearance_m >= 0.0) || !std::isfinite(safety_clearance_m)) return bad("safety_clearance_m must be >= 0");
   if (!(safety_sample_s >= 1e-3) || !std::isfinite(safety_sample_s)) return bad("safety_sample_s must be >= 0.001");
@@ -74,7 +76,7 @@ std::unique_ptr<ReplanFsm> ReplanFsm::create(const Config& config, std::string* 
 }
 
 ReplanFsm::ReplanFsm(const Config& config, std::unique_ptr<TopoReplanner> replanner)
-    : config_(config), replanner_(std::move(replanner)) {}
+    : config_(config), replanner_(std::move(replanner)), takeover_delay_s_(config.takeover_delay_s) {}
 
 FsmState ReplanFsm::state() const {
   std::lock_guard<std::mutex> lock(mutex_);
@@ -228,7 +230,7 @@ bool ReplanFsm::startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out) {
                                                      " m from an obstacle");
   }
   // The reference starts from the state at which the first trajectory on it will take over.
-  FlatState start = takeoverStateLocked(t + config_.takeover_delay_s);
+  FlatState start = takeoverStateLocked(t + takeover_delay_s_);
   start.jerk.setZero();  // the reference's jerk at the start is free of the spline's knots
   std::vector<Eigen::Vector3d> waypoints{start.position};
   for (const Eigen::Vector3d& g : goals)
@@ -250,7 +252,7 @@ bool ReplanFsm::startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out) {
 void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, std::unique_lock<std::mutex>* lock,
                      FsmOutput* out, const std::function<double()>& now) {
   const bool generating = state_ == FsmState::kGenNewTraj;
-  const double t_take = t + config_.takeover_delay_s;
+  const double t_take = t + takeover_delay_s_;
   ReplanRequest request;
   request.start = takeoverStateLocked(t_take);
   request.reference_time_s = generating ? 0.0 : referenceTimeAtLocked(t_take);
@@ -272,6 +274,12 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
   event.message = result.message;
   event.stats = result.stats;
   const bool superseded = (current_ ? current_->id : -1) != current_id;
+  // The takeover delay adapts to the planning time: a late plan lengthens it (up to the maximum),
+  // on time plans bring it back towards the configured value.
+  if (finished > t_take)
+    takeover_delay_s_ = std::min(config_.max_takeover_delay_s, 1.5 * (finished - t));
+  else
+    takeover_delay_s_ = std::max(config_.takeover_delay_s, std::max(0.9 * takeover_delay_s_, 1.5 * (finished - t)));
   if (result.status == ReplanStatus::kSuccess && !superseded && finished <= t_take) {
     ExecTrajectory traj;
     traj.id = next_id_++;
@@ -392,7 +400,7 @@ FsmOutput ReplanFsm::checkSafety(double t, const EsdfMap& map) {
   // that ends moving, past which nothing is planned) closer than that cannot wait for a replan.
   const FlatState s = takeoverStateLocked(t);
   const double stop_time = s.velocity.norm() / config_.brake_acc_mps2 + config_.emergency_margin_s +
-                           config_.takeover_delay_s;
+                           takeover_delay_s_;
   const double hit = firstCollisionTime(*current_, t, map);
   const double end_speed =
       current_->spline.derivative().evaluate(std::max(0.0, current_->spline.duration() - 1e-6)).norm();

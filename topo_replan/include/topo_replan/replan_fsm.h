@@ -13,7 +13,7 @@
 //                   tick, and replanned when it collides ahead, or after replan_interval_s of
 //                   execution so that the horizon moves along the reference
 //   REPLAN_TRAJ     planning from the state on the current trajectory at the time the new one takes
-//                   over (now + takeover_delay_s); on failure the current one is kept while it is
+//                   over (now + a takeover delay that adapts to the planning time); on failure the current one is kept while it is
 //                   safe and planning is retried every tick
 //   EMERGENCY_STOP  no safe trajectory and a collision closer than the braking distance: a braking
 //                   trajectory (constant deceleration along the velocity) is executed; once stopped,
@@ -96,6 +96,8 @@ class ReplanFsm {
     TopoReplanner::Config replanner;  ///< search, optimiser and horizon (horizon_m)
     ReferenceConfig reference;        ///< limits of the global reference (keep <= the optimiser's)
     double takeover_delay_s = 0.1;    ///< a new trajectory takes over this long after planning starts [s]
+    /// The delay adapts to the planning time (1.5 x the last one, when longer), up to this [s].
+    double max_takeover_delay_s = 0.5;
     double replan_interval_s = 1.0;   ///< replan after executing the current one this long [s]
     double safety_clearance_m = 0.2;  ///< the executing trajectory collides below this ESDF distance [m]
     double safety_sample_s = 0.02;    ///< time step of the safety check [s]
@@ -165,6 +167,7 @@ class ReplanFsm {
   int64_t next_id_ = 0;
   bool collision_ahead_ = false;  // set by checkSafety, consumed by tick
   int consecutive_failures_ = 0;
+  double takeover_delay_s_;       // the adaptive takeover delay (tick() only writes it, under the mutex)
 };
 
 }  // namespace topo_planner
