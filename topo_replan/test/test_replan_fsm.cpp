@@ -3,7 +3,9 @@
 // that change under it (obstacles revealed ahead).
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <memory>
+#include <thread>
 
 #include "plan_env/synthetic_scene.h"
 #include "topo_replan/replan_fsm.h"
@@ -217,6 +219,53 @@ TEST(ReplanFsm, StopsBeforeAWallWithNoWayAround) {
   EXPECT_LT(log.flown.back().x(), 11.0 - config.safety_clearance_m);
   EXPECT_EQ(fsm->state(), FsmState::kWaitTarget);
   expectContinuous(log.trajectories);
+}
+
+// The node's threads: the planning thread ticks while a safety thread checks and an odometry thread
+// feeds the state, all at once (run under ThreadSanitizer by make test-tsan). The outcome must be
+// that of a flight: trajectories with increasing ids and the goal reached.
+TEST(ReplanFsm, TickSafetyAndOdometryFromThreeThreads) {
+  Corridor c;
+  c.scene.pillar(12.0, 4.0, 0.6);
+  const EsdfMap& map = c.scene.finish();
+  auto fsm = makeFsm();
+  std::atomic<double> clock{0.0}, odometry_time{-1.0};
+  std::atomic<bool> done{false};
+  ASSERT_TRUE(fsm->setOdometry(0.0, {1, 4, 1.5}, Eigen::Vector3d::Zero()));
+  ASSERT_EQ(fsm->setGoals({{22, 4, 1.5}}), GoalStatus::kAccepted);
+  std::thread odometry([&] {
+    while (!done) {
+      PerfectVehicle v{Eigen::Vector3d(1, 4, 1.5)};
+      const double t = clock;
+      v.follow(*fsm, t);
+      fsm->setOdometry(t, v.position, v.velocity);
+      odometry_time = t;
+      std::this_thread::yield();
+    }
+  });
+  std::thread safety([&] {
+    while (!done) {
+      fsm->checkSafety(clock, map);
+      std::this_thread::yield();
+    }
+  });
+  int64_t last_id = -1;
+  bool reached = false;
+  for (int k = 0; k < 800 && !reached; ++k) {
+    clock = k * 0.05;
+    while (odometry_time < clock) std::this_thread::yield();  // odometry of this instant has arrived
+    const FsmOutput out = fsm->tick(clock, map);
+    if (out.trajectory) {
+      EXPECT_GT(out.trajectory->id, last_id);
+      last_id = out.trajectory->id;
+    }
+    reached = out.goal_reached;
+  }
+  done = true;
+  odometry.join();
+  safety.join();
+  EXPECT_TRUE(reached);
+  EXPECT_GE(last_id, 2);
 }
 
 TEST(ReplanFsm, InvalidConfigIsRefused) {
