@@ -1,6 +1,7 @@
 #include "plan_env/esdf_map.h"
 
 #include <algorithm>
+#include <cassert>
 #include <functional>
 #include <cmath>
 #include <sstream>
@@ -357,6 +358,28 @@ bool EsdfMap::isInflatedOccupied(const Eigen::Vector3i& index) const {
 bool EsdfMap::isInflatedOccupied(const Eigen::Vector3d& point) const {
   if (!geometry().inWindow(point)) return true;
   return isInflatedOccupied(geometry().indexOf(point));
+}
+
+bool ascendDistance(const EsdfMap& map, const Eigen::Vector3d& from,
+                    const std::function<bool(const Eigen::Vector3d&)>& done, double max_length_m,
+                    std::vector<Eigen::Vector3d>* path) {
+  assert(path);
+  path->clear();
+  double distance = 0.0;
+  Eigen::Vector3d gradient;
+  if (!map.interpolate(from, &distance, &gradient)) return false;
+  path->push_back(from);
+  const double step = 0.5 * map.geometry().resolution();
+  for (double length = 0.0; !done(path->back()); length += step) {
+    const double norm = gradient.norm();
+    if (!(length + step <= max_length_m) || !(norm > 1e-3)) return false;
+    const Eigen::Vector3d next = path->back() + gradient * (step / norm);
+    double next_distance = 0.0;
+    if (!map.interpolate(next, &next_distance, &gradient) || next_distance < distance - 1e-6) return false;
+    distance = next_distance;
+    path->push_back(next);
+  }
+  return true;
 }
 
 }  // namespace topo_planner

@@ -5,6 +5,7 @@
 
 #include "plan_env/distance_transform.h"
 #include "plan_env/esdf_map.h"
+#include "plan_env/synthetic_scene.h"
 #include "test_helpers.h"
 
 namespace topo_planner {
@@ -299,6 +300,42 @@ TEST(Esdf, ScrolledWindowRecomputesToTheSameField) {
   auto fresh = test::makeEsdf(occ, 0.5);
   fresh->updateAll();
   EXPECT_EQ(fresh->distances(), esdf->distances());
+}
+
+// The walk out of an obstacle's clearance goes straight away from a pillar, never loses distance,
+// and stops at the first point where the target holds; it refuses where the field is flat.
+TEST(Esdf, AscendDistanceLeavesThePillarRadially) {
+  SyntheticScene scene(Eigen::Vector3d(6.0, 6.0, 2.0));
+  scene.pillar(3.0, 3.0, 0.5);
+  const EsdfMap& esdf = scene.finish();
+  const Eigen::Vector3d from(3.62, 3.31, 1.0);  // about 0.25 m from the nearest pillar voxel
+  const Eigen::Vector2d radial = (from.head<2>() - Eigen::Vector2d(3.0, 3.0)).normalized();
+  auto distance = [&](const Eigen::Vector3d& p) { return esdf.query(p).distance; };
+  std::vector<Eigen::Vector3d> path;
+  ASSERT_TRUE(ascendDistance(esdf, from, [&](const Eigen::Vector3d& p) { return distance(p) >= 0.6; }, 1.0, &path));
+  ASSERT_GE(path.size(), 2u);
+  EXPECT_EQ(path.front(), from);
+  EXPECT_GE(distance(path.back()), 0.6);
+  EXPECT_LT(distance(path[path.size() - 2]), 0.6);
+  for (size_t i = 1; i < path.size(); ++i) {
+    EXPECT_GE(distance(path[i]), distance(path[i - 1]) - 1e-9);
+    EXPECT_NEAR((path[i] - path[i - 1]).norm(), 0.05, 1e-9);
+    const Eigen::Vector2d out = path[i].head<2>() - Eigen::Vector2d(3.0, 3.0);
+    EXPECT_GT(out.normalized().dot(radial), 0.95) << "step " << i;  // away from the axis (voxelised pillar)
+    EXPECT_NEAR(path[i].z(), 1.0, 1e-6);                             // no vertical component
+  }
+  // Too short a walk allowed: false, with the walk so far.
+  EXPECT_FALSE(ascendDistance(esdf, from, [&](const Eigen::Vector3d& p) { return distance(p) >= 0.6; }, 0.1, &path));
+  EXPECT_LE(path.size(), 3u);
+  // Beyond the truncation the field is flat: nowhere to go.
+  SyntheticScene empty(Eigen::Vector3d(6.0, 6.0, 2.0));
+  const EsdfMap& flat = empty.finish();
+  EXPECT_FALSE(ascendDistance(flat, {3, 3, 1}, [](const Eigen::Vector3d&) { return false; }, 1.0, &path));
+  // Already done: the path is the start alone. Outside the map: false.
+  EXPECT_TRUE(ascendDistance(esdf, from, [](const Eigen::Vector3d&) { return true; }, 1.0, &path));
+  EXPECT_EQ(path.size(), 1u);
+  EXPECT_FALSE(ascendDistance(esdf, {30, 3, 1}, [](const Eigen::Vector3d&) { return true; }, 1.0, &path));
+  EXPECT_FALSE(ascendDistance(esdf, {NAN, 3, 1}, [](const Eigen::Vector3d&) { return true; }, 1.0, &path));
 }
 
 }  // namespace

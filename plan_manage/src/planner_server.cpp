@@ -268,6 +268,9 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("fsm/goal_tolerance_m", f.goal_tolerance_m);
   r.read("fsm/stopped_speed_mps", f.stopped_speed_mps);
   r.read("fsm/max_plan_failures", f.max_plan_failures);
+  r.read("fsm/escape_clearance_m", f.escape_clearance_m);
+  r.read("fsm/escape_speed_mps", f.escape_speed_mps);
+  r.read("fsm/max_escape_length_m", f.max_escape_length_m);
 
   // Limits: the optimiser's are the vehicle's; the reference flies below them (reference_speed_ratio)
   // so detours around obstacles need no time stretching.
@@ -285,6 +288,8 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("reference/max_segment_length_m", f.reference.max_segment_length_m);
   f.brake_acc_mps2 = max_acc;
   r.read("fsm/brake_acc_mps2", f.brake_acc_mps2);
+  f.max_brake_acc_mps2 = std::max(f.max_brake_acc_mps2, f.brake_acc_mps2);
+  r.read("fsm/max_brake_acc_mps2", f.max_brake_acc_mps2);
 
   TopoReplanner::Config& p = f.replanner;
   p.local_goal_margin_m = 1.0;
@@ -292,6 +297,7 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("replan/reference_clearance_m", p.reference_clearance_m);
   r.read("replan/local_goal_margin_m", p.local_goal_margin_m);
   r.read("replan/control_point_spacing_m", p.control_point_spacing_m);
+  r.read("replan/max_search_start_offset_m", p.max_search_start_offset_m);
   r.read("replan/num_threads", p.num_threads);
   r.read("search/clearance_m", p.search.clearance_m);
   r.read("search/max_paths", p.search.max_paths);

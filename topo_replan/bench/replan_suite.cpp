@@ -95,11 +95,12 @@ TaskOutcome runMethod(Method method, TopoReplanner& replanner, const PathGuidedO
         o = optimizer.gtoWithRestarts(lp.initial, map, restarts, seed);
       } else {
         const auto t0 = std::chrono::steady_clock::now();
-        const GridAStar::Result a = astar.search(map, lp.start, lp.goal);
+        const GridAStar::Result a = astar.search(map, lp.search_start, lp.goal);
         Path guide;
         if (a.status == SearchStatus::kSuccess) {
           const VisibilityChecker checker(map, replanner.config().astar.clearance_m, true);
           guide = PathShortener(checker).shorten(a.path);
+          if (lp.search_start != lp.start) guide.insert(guide.begin(), lp.start);  // as the replanner does
         }
         out.search_ms = msSince(t0);
         out.paths = guide.empty() ? 0 : 1;

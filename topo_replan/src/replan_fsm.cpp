@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 
 namespace topo_planner {
 
@@ -56,6 +57,12 @@ bool ReplanFsm::Config::validate(std::string* why) const {
   if (!(safety_clearance_m >= 0.0) || !std::isfinite(safety_clearance_m)) return bad("safety_clearance_m must be >= 0");
   if (!(safety_sample_s >= 1e-3) || !std::isfinite(safety_sample_s)) return bad("safety_sample_s must be >= 0.001");
   if (!(brake_acc_mps2 > 0.0) || !std::isfinite(brake_acc_mps2)) return bad("brake_acc_mps2 must be positive");
+  if (!(max_brake_acc_mps2 >= brake_acc_mps2) || !std::isfinite(max_brake_acc_mps2))
+    return bad("max_brake_acc_mps2 must be >= brake_acc_mps2");
+  if (!(escape_clearance_m > 0.0) || !std::isfinite(escape_clearance_m)) return bad("escape_clearance_m must be positive");
+  if (!(escape_speed_mps > 0.0) || !std::isfinite(escape_speed_mps)) return bad("escape_speed_mps must be positive");
+  if (!(max_escape_length_m >= 0.0) || !(max_escape_length_m <= 10.0))
+    return bad("max_escape_length_m must be in [0, 10]");
   if (!(emergency_margin_s >= 0.0) || !std::isfinite(emergency_margin_s)) return bad("emergency_margin_s must be >= 0");
   if (!(goal_clearance_m >= 0.0) || !std::isfinite(goal_clearance_m)) return bad("goal_clearance_m must be >= 0");
   if (!(goal_tolerance_m > 0.0) || !std::isfinite(goal_tolerance_m)) return bad("goal_tolerance_m must be positive");
@@ -147,7 +154,7 @@ FlatState ReplanFsm::takeoverStateLocked(double t_takeover) const {
 }
 
 double ReplanFsm::referenceTimeAtLocked(double t) const {
-  if (!current_ || current_->braking) return 0.0;
+  if (!current_ || current_->braking || current_->escape) return 0.0;
   const double d = current_->spline.duration();
   const double frac = d > 0.0 ? std::clamp((t - current_->start_time_s) / d, 0.0, 1.0) : 1.0;
   const double estimate = current_->reference_start_s + frac * (current_->reference_end_s - current_->reference_start_s);
@@ -178,38 +185,111 @@ ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::s
   FlatState s0 = takeoverStateLocked(t);
   if (!current_) s0.velocity = odom_velocity_;
   const double speed = s0.velocity.norm();
-  std::vector<Eigen::Vector3d> points;
-  double interval = 0.1;
-  Eigen::Vector3d start_acc = Eigen::Vector3d::Zero();
-  if (speed < 0.05) {
-    points.assign(4, s0.position);
-    s0.velocity.setZero();
-  } else {
-    // Constant deceleration along the velocity: p(tau) = p0 + u (v tau - a tau^2 / 2).
-    const Eigen::Vector3d u = s0.velocity / speed;
-    const double a = config_.brake_acc_mps2, T = speed / a;
-    const int n = std::max(4, int(std::ceil(T / 0.05)));
-    interval = T / n;
-    for (int k = 0; k <= n; ++k) {
-      const double tau = k * interval;
-      points.push_back(s0.position + u * (speed * tau - 0.5 * a * tau * tau));
+  if (speed < 0.05) s0.velocity.setZero();
+  // Constant deceleration a along the velocity: p(tau) = p0 + u (v tau - a tau^2 / 2).
+  auto brakeAt = [&](double a) {
+    std::vector<Eigen::Vector3d> points;
+    double interval = 0.1;
+    Eigen::Vector3d start_acc = Eigen::Vector3d::Zero();
+    if (speed < 0.05) {
+      points.assign(4, s0.position);
+    } else {
+      const Eigen::Vector3d u = s0.velocity / speed;
+      const double T = speed / a;
+      const int n = std::max(4, int(std::ceil(T / 0.05)));
+      interval = T / n;
+      for (int k = 0; k <= n; ++k) {
+        const double tau = k * interval;
+        points.push_back(s0.position + u * (speed * tau - 0.5 * a * tau * tau));
+      }
+      start_acc = -a * u;
     }
-    start_acc = -a * u;
+    ExecTrajectory brake;
+    brake.start_time_s = t;
+    brake.braking = true;
+    if (!UniformBspline::fitToPoints(points, interval, s0.velocity, start_acc, Eigen::Vector3d::Zero(),
+                                     Eigen::Vector3d::Zero(), 3, &brake.spline)) {
+      // Only for a degenerate state; hold the position instead (a spline of equal points).
+      brake.spline = UniformBspline::straightLine(s0.position, s0.position, 6, 3, 0.1);
+    }
+    return brake;
+  };
+  // At the planner's limit when that stops in time; harder (up to the vehicle's) when it does not.
+  double a = config_.brake_acc_mps2;
+  ExecTrajectory brake = brakeAt(a);
+  double hit = firstCollisionTime(brake, t, map);
+  while (hit >= 0.0 && speed >= 0.05 && a < config_.max_brake_acc_mps2) {
+    a = std::min(config_.max_brake_acc_mps2, 1.25 * a);
+    brake = brakeAt(a);
+    hit = firstCollisionTime(brake, t, map);
   }
-  ExecTrajectory brake;
-  brake.start_time_s = t;
-  brake.braking = true;
-  if (!UniformBspline::fitToPoints(points, interval, s0.velocity, start_acc, Eigen::Vector3d::Zero(),
-                                   Eigen::Vector3d::Zero(), 3, &brake.spline)) {
-    // Only for a degenerate state; hold the position instead (a spline of equal points).
-    brake.spline = UniformBspline::straightLine(s0.position, s0.position, 6, 3, 0.1);
+  if (report) {
+    char decel[64];
+    std::snprintf(decel, sizeof(decel), "braking at %.2f m/s^2 ", speed < 0.05 ? 0.0 : a);
+    *report = std::string(decel) + (hit < 0.0 ? "checked: collision-free"
+                                              : "checked: comes within the safety clearance " +
+                                                    std::to_string(hit - t) + " s after braking starts");
   }
-  const double hit = firstCollisionTime(brake, t, map);
-  if (report)
-    *report = hit < 0.0 ? "braking trajectory checked: collision-free"
-                        : "braking trajectory checked: comes within the safety clearance " +
-                              std::to_string(hit - t) + " s after braking starts";
   return brake;
+}
+
+std::optional<ExecTrajectory> ReplanFsm::escapeTrajectoryLocked(double t, const EsdfMap& map,
+                                                                std::string* report) const {
+  const Eigen::Vector3d p0 = takeoverStateLocked(t).position;
+  double d0 = 0.0;
+  if (!(config_.max_escape_length_m > 0.0) || !map.interpolate(p0, &d0, nullptr)) {
+    *report = "no escape: disabled, or the vehicle is outside the map";
+    return std::nullopt;
+  }
+  const double target = config_.escape_clearance_m;
+  std::vector<Eigen::Vector3d> walk;
+  if (!ascendDistance(map, p0, [&](const Eigen::Vector3d& p) {
+        double d = 0.0;
+        return map.interpolate(p, &d, nullptr) && d >= target;
+      }, config_.max_escape_length_m, &walk) || walk.size() < 2) {
+    *report = "no escape: no way up the distance field to " + std::to_string(target) + " m within " +
+              std::to_string(config_.max_escape_length_m) + " m";
+    return std::nullopt;
+  }
+  std::vector<double> arc{0.0};
+  for (size_t i = 1; i < walk.size(); ++i) arc.push_back(arc.back() + (walk[i] - walk[i - 1]).norm());
+  const double length = arc.back();
+  // Rest to rest along the walk with a smoothstep s(u) = L (3u^2 - 2u^3), whose peak speed is 1.5 L / T.
+  const double T = std::max(0.5, 1.5 * length / config_.escape_speed_mps);
+  const int n = std::max(6, int(std::ceil(T / 0.05)));
+  std::vector<Eigen::Vector3d> points;
+  size_t seg = 1;
+  for (int k = 0; k <= n; ++k) {
+    const double u = double(k) / n, s = length * u * u * (3.0 - 2.0 * u);
+    while (seg + 1 < walk.size() && arc[seg] < s) ++seg;
+    const double span = arc[seg] - arc[seg - 1];
+    const double f = span > 0.0 ? std::clamp((s - arc[seg - 1]) / span, 0.0, 1.0) : 1.0;
+    points.push_back(walk[seg - 1] + f * (walk[seg] - walk[seg - 1]));
+  }
+  ExecTrajectory escape;
+  escape.start_time_s = t;
+  escape.escape = true;
+  const Eigen::Vector3d zero = Eigen::Vector3d::Zero();
+  if (!UniformBspline::fitToPoints(points, T / n, zero, zero, zero, zero, 3, &escape.spline)) {
+    *report = "no escape: the walk could not be fitted";
+    return std::nullopt;
+  }
+  // Checked along the curve: never closer than it starts (nor than the safety clearance, when it
+  // starts farther), never out of the map.
+  const double floor_m = std::min(d0, config_.safety_clearance_m) - 0.02;
+  for (double tau = 0.0;; tau = std::min(escape.spline.duration(), tau + config_.safety_sample_s)) {
+    double d = 0.0;
+    if (!map.interpolate(escape.spline.evaluate(tau), &d, nullptr) || d < floor_m) {
+      *report = "no escape: the fitted escape comes closer to an obstacle than it starts";
+      return std::nullopt;
+    }
+    if (tau >= escape.spline.duration()) break;
+  }
+  char text[160];
+  std::snprintf(text, sizeof(text), "escape: %.2f m up the distance field from %.2f m to %.2f m clearance in %.1f s",
+                length, d0, target, escape.spline.duration());
+  *report = text;
+  return escape;
 }
 
 bool ReplanFsm::startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out) {
@@ -301,17 +381,35 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
     if (superseded) {
       // A braking trajectory took over while planning: the emergency stop owns the state now.
     } else if (generating) {
-      const bool moving = current_ && !current_->braking && t < current_->endTime();
+      const bool moving = current_ && !current_->braking && !current_->escape && t < current_->endTime();
       event.fallback = consecutive_failures_ >= config_.max_plan_failures ? "give_up"
                        : moving                                           ? "keep_current"
                                                                           : "hover_retry";
     } else {
       event.fallback = "keep_current";
     }
-    if (event.fallback == "give_up") {
+    // At rest too close to an obstacle for the replanner to start: a slow escape first, then (as
+    // after braking) a new reference from where it ends.
+    const bool at_rest = !current_ || t >= current_->endTime();
+    std::string escape_report;
+    std::optional<ExecTrajectory> escape;
+    if (!superseded && result.status == ReplanStatus::kStartInCollision && at_rest && event.fallback != "give_up")
+      escape = escapeTrajectoryLocked(t, map, &escape_report);
+    if (escape) {
+      escape->id = next_id_++;
+      current_ = *escape;
+      collision_ahead_ = false;
+      event.published = true;
+      event.fallback = "escape";
+      event.message += "; " + escape_report;
+      out->trajectory = *escape;
+      setState(FsmState::kEmergencyStop, out, escape_report);
+    } else if (event.fallback == "give_up") {
+      if (!escape_report.empty()) event.message += "; " + escape_report;
       setState(FsmState::kWaitTarget, out, "no trajectory after " + std::to_string(consecutive_failures_) + " tries");
       consecutive_failures_ = 0;
     } else if (!superseded && !generating) {
+      if (!escape_report.empty()) event.message += "; " + escape_report;
       setState(FsmState::kExecTraj, out, "");
       collision_ahead_ = collision_ahead_ || trigger == FsmEvent::Trigger::kCollisionAhead;
     }
@@ -394,7 +492,8 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
 FsmOutput ReplanFsm::checkSafety(double t, const EsdfMap& map) {
   std::lock_guard<std::mutex> lock(mutex_);
   FsmOutput out;
-  if (!current_ || current_->braking || !std::isfinite(t) || state_ == FsmState::kInit) return out;
+  // Braking and escapes were checked when made and are not replanned (they end at rest).
+  if (!current_ || current_->braking || current_->escape || !std::isfinite(t) || state_ == FsmState::kInit) return out;
   if (t > current_->endTime() && state_ == FsmState::kWaitTarget) return out;
   // Time to stop from the current speed, plus the margin: a collision (or the end of a trajectory
   // that ends moving, past which nothing is planned) closer than that cannot wait for a replan.

@@ -49,6 +49,8 @@ bool TopoReplanner::Config::validate(std::string* why) const {
   if (!(std::isfinite(local_goal_margin_m) && local_goal_margin_m >= 0.0)) err << "local_goal_margin_m must be >= 0; ";
   if (!(reference_sample_s >= 1e-4 && reference_sample_s < 1.0)) err << "reference_sample_s must be in [1e-4, 1); ";
   if (!(control_point_spacing_m > 0.0)) err << "control_point_spacing_m must be positive; ";
+  if (!(max_search_start_offset_m >= 0.0 && max_search_start_offset_m <= 5.0))
+    err << "max_search_start_offset_m must be in [0, 5]; ";
   if (num_threads < 1 || num_threads > 64) err << "num_threads must be in [1, 64]; ";
   if (!(std::isfinite(duration_weight) && duration_weight >= 0.0)) err << "duration_weight must be >= 0; ";
   const std::string s = err.str();
@@ -100,8 +102,17 @@ LocalProblem TopoReplanner::localProblem(const EsdfMap& map, const ReplanRequest
   const DistanceQuery at_start = map.query(start.position);
   if (at_start.status == QueryStatus::kOutOfMap || at_start.status == QueryStatus::kInvalidInput)
     return fail(ReplanStatus::kInvalidInput, "the start is outside the map");
-  if (at_start.distance < config_.optimizer.clearance_m || !search_free.isFree(start.position))
-    return fail(ReplanStatus::kStartInCollision, "the start is closer than the clearance to an obstacle");
+  if (at_start.distance < config_.optimizer.clearance_m)
+    return fail(ReplanStatus::kStartInCollision, "the start is closer than the optimiser's clearance to an obstacle");
+  lp.search_start = start.position;
+  if (!search_free.isFree(start.position)) {
+    std::vector<Eigen::Vector3d> walk;
+    if (!(config_.max_search_start_offset_m > 0.0) ||
+        !ascendDistance(map, start.position, [&](const Eigen::Vector3d& p) { return search_free.isFree(p); },
+                        config_.max_search_start_offset_m, &walk))
+      return fail(ReplanStatus::kStartInCollision, "the start is inside the search's clearance with no way out of it");
+    lp.search_start = walk.back();
+  }
 
   // The reference within the horizon: where does it first collide, where does the horizon end.
   const double dt = config_.reference_sample_s, T = ref.duration();
@@ -212,7 +223,13 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
   // Guide paths: the topological search.
   result.stats.searched = true;
   auto t_search = std::chrono::steady_clock::now();
-  const TopoSearchResult search = search_.search(map, lp.start, lp.goal);
+  // Guides from a moved search start begin at the start itself.
+  auto fromStart = [&](std::vector<Path> paths) {
+    if (lp.search_start != lp.start)
+      for (Path& path : paths) path.insert(path.begin(), lp.start);
+    return paths;
+  };
+  const TopoSearchResult search = search_.search(map, lp.search_start, lp.goal);
   result.stats.search = search.stats;
   result.stats.search_ms = msSince(t_search);
 
@@ -238,17 +255,17 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
         result.chosen = int(i);
     }
   };
-  if (search.status == SearchStatus::kSuccess) optimizeAll(search.paths);
+  if (search.status == SearchStatus::kSuccess) optimizeAll(fromStart(search.paths));
 
   // Last resort, when the search found nothing or no candidate passed: one A* guide.
   if (result.chosen < 0) {
     t_search = std::chrono::steady_clock::now();
-    const GridAStar::Result astar = astar_.search(map, lp.start, lp.goal);
+    const GridAStar::Result astar = astar_.search(map, lp.search_start, lp.goal);
     result.stats.search_ms += msSince(t_search);
     if (astar.status == SearchStatus::kSuccess) {
       const VisibilityChecker checker(map, config_.astar.clearance_m, config_.astar.unknown_is_free);
       result.stats.used_astar = true;
-      optimizeAll({PathShortener(checker).shorten(astar.path)});
+      optimizeAll(fromStart({PathShortener(checker).shorten(astar.path)}));
     } else if (result.candidates.empty()) {
       return fail(ReplanStatus::kNoPath, std::string("no guide path: ") + toString(search.status) + ", A*: " +
                                              toString(astar.status));

@@ -221,6 +221,78 @@ TEST(ReplanFsm, StopsBeforeAWallWithNoWayAround) {
   expectContinuous(log.trajectories);
 }
 
+// An obstacle revealed so late that braking at the planner's limit cannot stop before it: the
+// braking trajectory decelerates harder (up to max_brake_acc_mps2) and stops outside the safety
+// clearance; with the harder braking switched off the same flight comes closer than that.
+TEST(ReplanFsm, BrakesHarderWhenAnObstacleIsSeenLate) {
+  Corridor before, after;
+  after.scene.box({11.0, -1.0, -1.0}, {11.4, 9.0, 4.0});  // closes the corridor; faces at x = 10.95
+  const EsdfMap& unknown = before.scene.finish();
+  const EsdfMap& revealed = after.scene.finish();
+  // Seen 0.65-0.75 m before the wall at up to 2 m/s: 0.8 m to stop at 2.5 m/s^2, plus the clearance.
+  auto mapAt = [&](double, const Eigen::Vector3d& p) -> const EsdfMap& { return p.x() < 10.2 ? unknown : revealed; };
+  ReplanFsm::Config config = testConfig();
+  config.max_plan_failures = 3;
+  ASSERT_DOUBLE_EQ(config.brake_acc_mps2, 2.5);
+  auto fsm = makeFsm(config);
+  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, mapAt, 400, revealed);
+  ASSERT_TRUE(log.braked);
+  const ExecTrajectory* brake = nullptr;
+  for (const ExecTrajectory& t : log.trajectories)
+    if (t.braking && !brake) brake = &t;
+  ASSERT_TRUE(brake);
+  const double deceleration = brake->spline.derivative().derivative().evaluate(0.0).norm();
+  EXPECT_GT(deceleration, 1.2 * config.brake_acc_mps2);
+  EXPECT_LE(deceleration, config.max_brake_acc_mps2 + 1e-6);
+  EXPECT_GT(log.min_clearance, config.safety_clearance_m);
+  EXPECT_FALSE(log.goal_reached);
+  expectContinuous(log.trajectories);
+
+  config.max_brake_acc_mps2 = config.brake_acc_mps2;
+  auto gentle = makeFsm(config);
+  const FlightLog gentle_log = fly(gentle.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, mapAt, 400, revealed);
+  ASSERT_TRUE(gentle_log.braked);
+  EXPECT_LT(gentle_log.min_clearance, config.safety_clearance_m);
+}
+
+// A vehicle at rest closer to an obstacle than the replanner can start from: it first escapes up the
+// distance field, slowly and never closer than it started, then flies the mission.
+TEST(ReplanFsm, EscapesFromInsideTheClearanceThenFliesTheMission) {
+  Corridor c;
+  c.scene.pillar(3.0, 4.0, 0.5);
+  const EsdfMap& map = c.scene.finish();
+  const Eigen::Vector3d start(3.0, 4.68, 1.5);
+  const double d0 = map.query(start).distance;
+  ASSERT_GT(d0, 0.1);
+  ASSERT_LT(d0, testConfig().replanner.optimizer.clearance_m);
+  auto fsm = makeFsm();
+  const FlightLog log = fly(fsm.get(), start, {{20, 4.5, 1.5}}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
+                            800, map);
+  ASSERT_GE(log.events.size(), 2u);
+  EXPECT_EQ(log.events.front().status, ReplanStatus::kStartInCollision);
+  EXPECT_EQ(log.events.front().fallback, "escape");
+  ASSERT_FALSE(log.trajectories.empty());
+  const ExecTrajectory& escape = log.trajectories.front();
+  ASSERT_TRUE(escape.escape);
+  const double end_clearance = map.query(escape.spline.evaluate(escape.spline.duration())).distance;
+  EXPECT_GE(end_clearance, testConfig().escape_clearance_m - 0.02);
+  EXPECT_LE(escape.spline.maxVelocity(), 1.2 * testConfig().escape_speed_mps);
+  EXPECT_GE(log.min_clearance, d0 - 0.02);  // never closer than it started
+  EXPECT_TRUE(log.goal_reached);
+  EXPECT_LT((log.flown.back() - Eigen::Vector3d(20, 4.5, 1.5)).norm(), 0.3);
+
+  // With the escape switched off it stays where it is and gives the mission up.
+  ReplanFsm::Config config = testConfig();
+  config.max_escape_length_m = 0.0;
+  config.max_plan_failures = 5;
+  auto stuck = makeFsm(config);
+  const FlightLog stuck_log = fly(stuck.get(), start, {{20, 4.5, 1.5}}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
+                                  100, map);
+  EXPECT_FALSE(stuck_log.goal_reached);
+  EXPECT_TRUE(stuck_log.trajectories.empty());
+  EXPECT_EQ(stuck->state(), FsmState::kWaitTarget);
+}
+
 // The node's threads: the planning thread ticks while a safety thread checks and an odometry thread
 // feeds the state, all at once (run under ThreadSanitizer by make test-tsan). The outcome must be
 // that of a flight: trajectories with increasing ids and the goal reached.

@@ -158,5 +158,45 @@ TEST(TopoReplanner, PoolGivesTheSameResultAsOneWorker) {
   EXPECT_EQ(a.trajectory.knotSpan(), b.trajectory.knotSpan());
 }
 
+// A start that keeps the optimiser's clearance but not the search's (replanning from a trajectory
+// that passes an obstacle closely): the search starts up the distance field, the guides begin at
+// the start, and the trajectory leaves from the start. Without the offset it is refused.
+TEST(TopoReplanner, StartInsideTheSearchClearanceIsSearchedFromOutsideIt) {
+  SyntheticScene scene({12.0, 8.0, 3.0});
+  scene.box({0.0, 2.0, -1.0}, {2.0, 3.0, 4.0});  // a wall beside the start, voxel centres up to y = 2.95
+  scene.pillar(6.0, 3.24, 0.6);                  // across the reference
+  const EsdfMap& map = scene.finish();
+  TopoReplanner::Config config = deterministicConfig(2);
+  config.search.clearance_m = config.astar.clearance_m = 0.4;
+  config.optimizer.clearance_m = 0.25;
+  const Eigen::Vector3d start(1.0, 3.24, 1.5);  // 0.29 m from the wall (interpolated), voxel centre 0.30 m
+  ASSERT_NEAR(map.query(start).distance, 0.29, 1e-6);
+  const PolynomialTrajectory ref = straightReference(start, {11, 3.24, 1.5});
+  ReplanRequest req;
+  req.start = ref.state(0.0);
+  req.reference = &ref;
+  std::string err;
+  auto replanner = TopoReplanner::create(config, &err);
+  ASSERT_TRUE(replanner) << err;
+  const LocalProblem lp = replanner->localProblem(map, req);
+  ASSERT_EQ(lp.status, ReplanStatus::kSuccess) << lp.message;
+  EXPECT_GT(lp.search_start.y(), start.y() + 0.05);  // moved away from the wall ...
+  EXPECT_LT((lp.search_start - start).norm(), config.max_search_start_offset_m + 1e-9);  // ... not far
+  const ReplanResult r = replanner->replan(map, req);
+  ASSERT_EQ(r.status, ReplanStatus::kSuccess) << r.message;
+  ASSERT_FALSE(r.candidates.empty());
+  for (const ReplanCandidate& c : r.candidates) {
+    ASSERT_GE(c.guide.size(), 2u);
+    EXPECT_EQ(c.guide.front(), start);
+    EXPECT_EQ(c.guide[1], lp.search_start);
+  }
+  EXPECT_LT((r.trajectory.evaluate(0.0) - start).norm(), 1e-9);
+
+  config.max_search_start_offset_m = 0.0;
+  auto strict = TopoReplanner::create(config, &err);
+  ASSERT_TRUE(strict) << err;
+  EXPECT_EQ(strict->replan(map, req).status, ReplanStatus::kStartInCollision);
+}
+
 }  // namespace
 }  // namespace topo_planner

@@ -129,4 +129,14 @@ class EsdfMap {
   std::vector<LineScratch> scratch_;
 };
 
+/// Walks up the distance field from `from`: steps of half a voxel along the normalised gradient of
+/// the interpolated distance, re-evaluated at every step, until `done(point)` holds. On true, `path`
+/// holds the walk, `from` first and the first point where done() holds last. False (path holds the
+/// walk so far) when the gradient vanishes (a ridge between obstacles or beyond the truncation), the
+/// walk leaves the map, a step would lower the distance, or the walk is longer than max_length_m.
+/// How a vehicle or a search start gets out of an obstacle's clearance by the shortest way.
+bool ascendDistance(const EsdfMap& map, const Eigen::Vector3d& from,
+                    const std::function<bool(const Eigen::Vector3d&)>& done, double max_length_m,
+                    std::vector<Eigen::Vector3d>* path);
+
 }  // namespace topo_planner

@@ -16,8 +16,11 @@
 //                   over (now + a takeover delay that adapts to the planning time); on failure the current one is kept while it is
 //                   safe and planning is retried every tick
 //   EMERGENCY_STOP  no safe trajectory and a collision closer than the braking distance: a braking
-//                   trajectory (constant deceleration along the velocity) is executed; once stopped,
-//                   a new reference from the stopping point is generated
+//                   trajectory (constant deceleration along the velocity, at brake_acc_mps2, harder
+//                   up to max_brake_acc_mps2 when that would not stop in time) is executed; once
+//                   stopped, a new reference from the stopping point is generated. A vehicle at rest
+//                   where the replanner cannot start (closer than its clearance to an obstacle)
+//                   first flies a short, slow escape up the distance field, also in this state.
 //
 // Every trajectory it returns has passed a collision and feasibility check on the map it was
 // planned on (the replanner's final check; the braking trajectory is checked too, and its result
@@ -64,6 +67,7 @@ struct ExecTrajectory {
   double reference_end_s = 0.0;    ///< ... and where it rejoins the reference
   bool ends_at_goal = false;       ///< rejoins the reference at its end (the last goal, at rest)
   bool braking = false;            ///< an emergency braking trajectory
+  bool escape = false;             ///< a slow manoeuvre out of an obstacle's clearance, from rest to rest
   double endTime() const { return start_time_s + spline.duration(); }
 };
 
@@ -102,11 +106,20 @@ class ReplanFsm {
     double safety_clearance_m = 0.2;  ///< the executing trajectory collides below this ESDF distance [m]
     double safety_sample_s = 0.02;    ///< time step of the safety check [s]
     double brake_acc_mps2 = 2.5;      ///< deceleration of the braking trajectory [m/s^2]
+    /// When braking at brake_acc_mps2 would come within the safety clearance (an obstacle seen late),
+    /// the braking trajectory decelerates harder, in steps of 1.25x up to this: the vehicle's limit,
+    /// not the planner's (the simulated controller's 0.7 rad tilt allows 8 m/s^2) [m/s^2].
+    double max_brake_acc_mps2 = 5.0;
     double emergency_margin_s = 0.3;  ///< stop when the collision is closer than the braking time plus this [s]
     double goal_clearance_m = 0.3;    ///< goals closer to a known obstacle are refused [m]
     double goal_tolerance_m = 0.3;    ///< the mission ends when the trajectory has ended and the vehicle is this close [m]
     double stopped_speed_mps = 0.2;   ///< below this the vehicle counts as stopped after braking [m/s]
     int max_plan_failures = 30;       ///< consecutive failed plans in GEN_NEW_TRAJ before giving up the mission
+    /// A vehicle at rest that the replanner refuses as kStartInCollision first moves up the distance
+    /// field (plan_env ascendDistance) until it is this far from obstacles (interpolated ESDF) [m].
+    double escape_clearance_m = 0.45;
+    double escape_speed_mps = 0.5;    ///< peak speed of the escape [m/s]
+    double max_escape_length_m = 1.0; ///< no escape when the way out is longer than this [m]; 0: never
 
     bool validate(std::string* why) const;
   };
@@ -146,6 +159,10 @@ class ReplanFsm {
   /// First time >= t at which the trajectory comes closer than safety_clearance_m; -1 if none.
   double firstCollisionTime(const ExecTrajectory& traj, double t, const EsdfMap& map) const;
   ExecTrajectory brakingTrajectory(double t, const EsdfMap& map, std::string* report) const;
+  /// From the commanded position at rest, up the distance field to escape_clearance_m, checked to
+  /// never come closer to an obstacle than it starts (or than the safety clearance); nullopt with
+  /// the reason in `report` when there is no such way.
+  std::optional<ExecTrajectory> escapeTrajectoryLocked(double t, const EsdfMap& map, std::string* report) const;
   void plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, std::unique_lock<std::mutex>* lock,
             FsmOutput* out, const std::function<double()>& now);
 

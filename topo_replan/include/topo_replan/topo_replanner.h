@@ -39,7 +39,8 @@ namespace topo_planner {
 enum class ReplanStatus {
   kSuccess,
   kStartInCollision,    ///< the current position is closer than the optimiser's clearance (interpolated)
-                        ///< or the search's clearance (voxel centre) to an obstacle
+                        ///< to an obstacle, or inside the search's clearance (voxel centre) with no way
+                        ///< out of it within max_search_start_offset_m
   kGoalInCollision,     ///< no safe reference point at or past the horizon
   kGoalOutOfMap,        ///< the local goal lies outside the map
   kInvalidInput,        ///< NaN/inf state, empty reference, invalid config
@@ -69,6 +70,10 @@ struct LocalProblem {
   ReplanStatus status = ReplanStatus::kInvalidInput;  ///< kSuccess when the problem is well posed
   std::string message;
   Eigen::Vector3d start = Eigen::Vector3d::Zero();
+  /// Where the guide search starts: the start, or, when the start keeps the optimiser's clearance
+  /// but not the search's, the first point up the distance field that keeps the search's (the guide
+  /// paths then begin with the start itself).
+  Eigen::Vector3d search_start = Eigen::Vector3d::Zero();
   Eigen::Vector3d goal = Eigen::Vector3d::Zero();
   double start_time_s = 0.0;           ///< reference time of the local start
   double goal_time_s = 0.0;            ///< reference time of the local goal
@@ -125,6 +130,10 @@ class TopoReplanner {
     double local_goal_margin_m = 0.0;
     double reference_sample_s = 0.01;     ///< time step of the reference check, at least 1e-4 [s]
     double control_point_spacing_m = 0.35;  ///< initial spline: about one control point per this [m]
+    /// A start that keeps the optimiser's clearance but not the search's (a trajectory may pass an
+    /// obstacle closer than the search's clearance, and replanning starts on it) is moved up the
+    /// distance field at most this far for the search [m]. 0: such a start is kStartInCollision.
+    double max_search_start_offset_m = 0.3;
     int num_threads = 2;                  ///< optimisation workers, the caller included
     double duration_weight = 0.0;         ///< selection cost weight of the duration [m^2/s^6]
 
