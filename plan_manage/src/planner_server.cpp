@@ -31,6 +31,7 @@ std::unique_ptr<PlannerServer> PlannerServer::create(const ros::NodeHandle& nh, 
   s.traj_vis_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("vis/trajectory", 5);
   s.candidates_vis_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("vis/candidates", 5);
   s.guides_vis_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("vis/guide_paths", 5);
+  s.roadmap_vis_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("vis/roadmap", 5);
   s.odom_sub_ = pnh.subscribe("odometry", 10, &PlannerServer::odomCallback, &s, ros::TransportHints().tcpNoDelay());
   s.goal_sub_ = pnh.subscribe("goal", 1, &PlannerServer::goalCallback, &s);
   s.waypoints_sub_ = pnh.subscribe("waypoints", 1, &PlannerServer::waypointsCallback, &s);
@@ -237,6 +238,37 @@ void PlannerServer::publishPlanMarkers(const ReplanResult& plan, const ExecTraje
   }
   candidates_vis_pub_.publish(candidates);
   guides_vis_pub_.publish(guides);
+  if (plan.roadmap.guards.empty()) return;
+  // The topological roadmap (Alg. 1): guards red, connectors blue, edges grey.
+  visualization_msgs::MarkerArray roadmap;
+  roadmap.markers.push_back(clear("roadmap"));
+  auto point = [](const Eigen::Vector3d& p) {
+    geometry_msgs::Point pt;
+    pt.x = p.x(), pt.y = p.y(), pt.z = p.z();
+    return pt;
+  };
+  auto marker = [&](int id, int type, double scale, float r, float g, float b) {
+    visualization_msgs::Marker m;
+    m.header.frame_id = f;
+    m.header.stamp = ros::Time::now();
+    m.ns = "roadmap";
+    m.id = id;
+    m.type = type;
+    m.pose.orientation.w = 1.0;
+    m.scale.x = m.scale.y = m.scale.z = scale;
+    m.color.r = r, m.color.g = g, m.color.b = b, m.color.a = 0.8f;
+    return m;
+  };
+  visualization_msgs::Marker guards = marker(0, visualization_msgs::Marker::SPHERE_LIST, 0.15, 1.0f, 0.1f, 0.1f);
+  for (const Eigen::Vector3d& p : plan.roadmap.guards) guards.points.push_back(point(p));
+  visualization_msgs::Marker connectors = marker(1, visualization_msgs::Marker::SPHERE_LIST, 0.1, 0.1f, 0.3f, 1.0f);
+  for (const Eigen::Vector3d& p : plan.roadmap.connectors) connectors.points.push_back(point(p));
+  visualization_msgs::Marker edges = marker(2, visualization_msgs::Marker::LINE_LIST, 0.02, 0.6f, 0.6f, 0.6f);
+  for (const auto& e : plan.roadmap.edges) edges.points.push_back(point(e.first)), edges.points.push_back(point(e.second));
+  roadmap.markers.push_back(guards);
+  if (!connectors.points.empty()) roadmap.markers.push_back(connectors);
+  if (!edges.points.empty()) roadmap.markers.push_back(edges);
+  roadmap_vis_pub_.publish(roadmap);
 }
 
 bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config) {
@@ -303,6 +335,8 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("search/max_paths", p.search.max_paths);
   r.read("search/max_length_ratio", p.search.max_length_ratio);
   r.read("search/max_time_s", p.search.roadmap.max_time_s);
+  p.search.keep_raw_paths = true;  // the roadmap for rviz (~vis/roadmap)
+  r.read("search/keep_roadmap", p.search.keep_raw_paths);
   r.read("optimizer/clearance_m", p.optimizer.clearance_m);
   r.read("optimizer/max_iterations", p.optimizer.max_iterations);
   r.read("optimizer/max_time_s", p.optimizer.max_time_s);

@@ -169,6 +169,10 @@ double ReplanFsm::referenceTimeAtLocked(double t) const {
   return best;
 }
 
+double ReplanFsm::stopTimeLocked(double t) const {
+  return takeoverStateLocked(t).velocity.norm() / config_.brake_acc_mps2 + config_.emergency_margin_s + takeover_delay_s_;
+}
+
 double ReplanFsm::firstCollisionTime(const ExecTrajectory& traj, double t, const EsdfMap& map) const {
   const double begin = std::max(t, traj.start_time_s), end = traj.endTime();
   for (double s = begin;; s = std::min(end, s + config_.safety_sample_s)) {
@@ -462,7 +466,10 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
       if (collision_ahead_) {
         plan(t, map, consecutive_failures_ > 0 ? FsmEvent::Trigger::kRetry : FsmEvent::Trigger::kCollisionAhead,
              &lock, &out, now);
-      } else if (!current_->ends_at_goal && (t - current_->start_time_s >= config_.replan_interval_s || ended)) {
+      } else if (!current_->ends_at_goal && (t - current_->start_time_s >= config_.replan_interval_s || ended ||
+                                             current_->endTime() - t <= stopTimeLocked(t) + 0.5 * config_.replan_interval_s)) {
+        // Periodically, and early enough before a trajectory that ends moving runs out that a
+        // failed plan still leaves retries before checkSafety() must brake for it.
         plan(t, map, consecutive_failures_ > 0 ? FsmEvent::Trigger::kRetry : FsmEvent::Trigger::kPeriodic, &lock,
              &out, now);
       }
@@ -498,8 +505,7 @@ FsmOutput ReplanFsm::checkSafety(double t, const EsdfMap& map) {
   // Time to stop from the current speed, plus the margin: a collision (or the end of a trajectory
   // that ends moving, past which nothing is planned) closer than that cannot wait for a replan.
   const FlatState s = takeoverStateLocked(t);
-  const double stop_time = s.velocity.norm() / config_.brake_acc_mps2 + config_.emergency_margin_s +
-                           takeover_delay_s_;
+  const double stop_time = stopTimeLocked(t);
   const double hit = firstCollisionTime(*current_, t, map);
   const double end_speed =
       current_->spline.derivative().evaluate(std::max(0.0, current_->spline.duration() - 1e-6)).norm();

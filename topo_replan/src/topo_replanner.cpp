@@ -232,6 +232,7 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
   };
   const TopoSearchResult search = search_.search(map, lp.search_start, lp.goal);
   result.stats.search = search.stats;
+  result.roadmap = search.roadmap;
   result.stats.search_ms = msSince(t_search);
 
   // One path-guided optimisation per guide, in parallel; each worker has its own optimiser.

@@ -7,6 +7,7 @@
 #include <memory>
 #include <thread>
 
+#include "plan_env/map_generator.h"
 #include "plan_env/synthetic_scene.h"
 #include "topo_replan/replan_fsm.h"
 
@@ -102,7 +103,7 @@ FlightLog fly(ReplanFsm* fsm, const Eigen::Vector3d& start, const std::vector<Ei
 
 // Consecutive trajectories join: the new one starts where the old one is at its start time, with
 // its velocity.
-void expectContinuous(const std::vector<ExecTrajectory>& trajs) {
+void expectContinuous(const std::vector<ExecTrajectory>& trajs, double max_velocity_step_mps = 0.2) {
   for (size_t i = 1; i < trajs.size(); ++i) {
     const ExecTrajectory &a = trajs[i - 1], &b = trajs[i];
     const double tau = std::clamp(b.start_time_s - a.start_time_s, 0.0, a.spline.duration());
@@ -111,7 +112,7 @@ void expectContinuous(const std::vector<ExecTrajectory>& trajs) {
       const Eigen::Vector3d va = tau < a.spline.duration() ? a.spline.derivative().evaluate(tau) : Eigen::Vector3d::Zero();
       // Exact unless the optimiser's time reallocation scaled the start velocity and the refit that
       // restores it failed its check (topo_replanner.h): then a small step remains.
-      EXPECT_LT((va - b.spline.derivative().evaluate(0.0)).norm(), 0.2) << "trajectory " << b.id;
+      EXPECT_LT((va - b.spline.derivative().evaluate(0.0)).norm(), max_velocity_step_mps) << "trajectory " << b.id;
     }
     EXPECT_GT(b.id, a.id);
   }
@@ -291,6 +292,44 @@ TEST(ReplanFsm, EscapesFromInsideTheClearanceThenFliesTheMission) {
   EXPECT_FALSE(stuck_log.goal_reached);
   EXPECT_TRUE(stuck_log.trajectories.empty());
   EXPECT_EQ(stuck->state(), FsmState::kWaitTarget);
+}
+
+// Seeded high-density forests like the simulation's (a 24 m x 20 m forest between a start and a
+// goal 30 m apart), the map known, the vehicle tracking perfectly: every flight reaches its goal
+// and keeps the safety clearance. Measured when written (a regression guard, not a target): 1 of 6
+// flights brakes once, 47 of 124 planning calls fail (kept trajectory or retry), velocity steps
+// between trajectories up to 0.23 m/s (the refit of topo_replanner.h failing its check).
+TEST(ReplanFsm, FliesSeededHighDensityForestsToTheirGoals) {
+  int events = 0, failed = 0, braked = 0;
+  for (uint32_t seed = 1; seed <= 6; ++seed) {
+    SyntheticScene scene(Eigen::Vector3d(40.0, 24.0, 3.4), 0.1, Eigen::Vector3d(-20.0, -12.0, 0.3));
+    const Eigen::Vector3d start(-15, 0, 1), goal(15.0, -4.0, 1.3);
+    ForestConfig forest = ForestConfig::preset(ObstacleDensity::kHigh);
+    forest.keep_free = {start, goal};
+    forest.keep_free_radius_m = 1.5;
+    forest.ground_z_m = 0.3;
+    forest.pillar_height_m = 3.4;
+    generateForest(forest, seed, scene.occupancy.get());
+    scene.fill([](const Eigen::Vector3d& p) { return std::abs(p.x()) > 12.0 || std::abs(p.y()) > 10.0; },
+               VoxelState::kFree);
+    const EsdfMap& map = scene.finish();
+    ReplanFsm::Config config = testConfig();
+    config.reference.max_vel_mps = 2.25;  // the planner node's: 0.75 x the optimiser's limits
+    config.reference.max_acc_mps2 = 1.875;
+    auto fsm = makeFsm(config);
+    const FlightLog log = fly(fsm.get(), start, {goal}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
+                              1200, map);
+    EXPECT_TRUE(log.goal_reached) << "seed " << seed;
+    braked += log.braked;
+    EXPECT_GT(log.min_clearance, config.safety_clearance_m) << "seed " << seed;
+    expectContinuous(log.trajectories, 0.3);
+    for (const FsmEvent& e : log.events) {
+      ++events;
+      failed += !e.published;
+    }
+  }
+  EXPECT_LE(braked, 1);
+  EXPECT_LT(failed, events / 2) << failed << " of " << events << " planning calls failed";
 }
 
 // The node's threads: the planning thread ticks while a safety thread checks and an odometry thread

@@ -21,6 +21,7 @@
 //               ~replan_event    topo_planner/ReplanEvent, every planning call
 //               ~reference_path  nav_msgs/Path (latched), the global reference
 //               ~vis/trajectory, ~vis/candidates, ~vis/guide_paths   visualization_msgs/MarkerArray
+//               ~vis/roadmap (guards, connectors, edges of the last search)  visualization_msgs/MarkerArray
 //
 // Parameters: see readPlannerParams() and config/planner.yaml.
 
@@ -80,7 +81,8 @@ class PlannerServer {
   std::unique_ptr<ros::AsyncSpinner> mapping_spinner_, planning_spinner_, safety_spinner_;
 
   ros::Subscriber odom_sub_, goal_sub_, waypoints_sub_;
-  ros::Publisher bspline_pub_, event_pub_, reference_pub_, traj_vis_pub_, candidates_vis_pub_, guides_vis_pub_;
+  ros::Publisher bspline_pub_, event_pub_, reference_pub_, traj_vis_pub_, candidates_vis_pub_, guides_vis_pub_,
+      roadmap_vis_pub_;
   ros::Timer plan_timer_, safety_timer_;
   std::atomic<double> last_odom_time_{-1.0};
   std::atomic<bool> initial_goals_sent_{false};

@@ -10,8 +10,9 @@
 //   GEN_NEW_TRAJ    a new global reference (minimum snap from the current state through the goals)
 //                   is built and the first local trajectory planned on it
 //   EXEC_TRAJ       flying the current local trajectory; it is checked against the latest map every
-//                   tick, and replanned when it collides ahead, or after replan_interval_s of
-//                   execution so that the horizon moves along the reference
+//                   tick, and replanned when it collides ahead, after replan_interval_s of
+//                   execution so that the horizon moves along the reference, or when it would run
+//                   out (end moving) within the stopping time plus replan_interval_s / 2
 //   REPLAN_TRAJ     planning from the state on the current trajectory at the time the new one takes
 //                   over (now + a takeover delay that adapts to the planning time); on failure the current one is kept while it is
 //                   safe and planning is retried every tick
@@ -156,6 +157,10 @@ class ReplanFsm {
   bool startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out);
   FlatState takeoverStateLocked(double t_takeover) const;
   double referenceTimeAtLocked(double t) const;
+  /// Time to stop from the commanded speed at t at brake_acc_mps2, plus the emergency margin and the
+  /// takeover delay: a collision (or the end of a trajectory that ends moving) closer than this
+  /// cannot wait for a replan.
+  double stopTimeLocked(double t) const;
   /// First time >= t at which the trajectory comes closer than safety_clearance_m; -1 if none.
   double firstCollisionTime(const ExecTrajectory& traj, double t, const EsdfMap& map) const;
   ExecTrajectory brakingTrajectory(double t, const EsdfMap& map, std::string* report) const;

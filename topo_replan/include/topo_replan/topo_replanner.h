@@ -110,6 +110,7 @@ struct ReplanResult {
   double local_goal_time_s = 0.0;     ///< reference time the trajectory rejoins the reference at
   double reference_collision_time_s = -1.0;  ///< first colliding reference time in the horizon; -1 if none
   std::vector<ReplanCandidate> candidates;   ///< one per guide path (for visualisation)
+  RoadmapGraph roadmap;               ///< the search's roadmap, with search.keep_raw_paths (for visualisation)
   int chosen = -1;                    ///< index into candidates; -1 when the reference itself was kept
   ReplanFallback fallback = ReplanFallback::kNone;
   double safe_prefix_s = 0.0;         ///< with kKeepReference: collision-free reference time left
