@@ -324,10 +324,11 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("fsm/max_brake_acc_mps2", f.max_brake_acc_mps2);
 
   TopoReplanner::Config& p = f.replanner;
-  p.local_goal_margin_m = 1.0;
+  p.local_goal_margin_m = 2.0;  // see config/planner.yaml (1 m failed 3x more moving-start replans)
   r.read("replan/horizon_m", p.horizon_m);
   r.read("replan/reference_clearance_m", p.reference_clearance_m);
   r.read("replan/local_goal_margin_m", p.local_goal_margin_m);
+  r.read("replan/max_local_goal_extension_m", p.max_local_goal_extension_m);
   r.read("replan/control_point_spacing_m", p.control_point_spacing_m);
   r.read("replan/max_search_start_offset_m", p.max_search_start_offset_m);
   r.read("replan/num_threads", p.num_threads);

@@ -48,6 +48,8 @@ bool TopoReplanner::Config::validate(std::string* why) const {
   if (!(std::isfinite(horizon_m) && horizon_m > 0.0)) err << "horizon_m must be positive; ";
   if (!(std::isfinite(reference_clearance_m) && reference_clearance_m >= 0.0)) err << "reference_clearance_m must be >= 0; ";
   if (!(std::isfinite(local_goal_margin_m) && local_goal_margin_m >= 0.0)) err << "local_goal_margin_m must be >= 0; ";
+  if (!(std::isfinite(max_local_goal_extension_m) && max_local_goal_extension_m >= 0.0))
+    err << "max_local_goal_extension_m must be >= 0; ";
   if (!(reference_sample_s >= 1e-4 && reference_sample_s < 1.0)) err << "reference_sample_s must be in [1e-4, 1); ";
   if (!(control_point_spacing_m > 0.0)) err << "control_point_spacing_m must be positive; ";
   if (!(max_search_start_offset_m >= 0.0 && max_search_start_offset_m <= 5.0))
@@ -142,17 +144,42 @@ LocalProblem TopoReplanner::localProblem(const EsdfMap& map, const ReplanRequest
   double t_g = t_h;
   while (t_g < T && collides(t_g)) t_g = std::min(T, t_g + dt);
   if (last_collision_s >= 0.0 && config_.local_goal_margin_m > 0.0) {
-    // At least local_goal_margin_m of free reference between the last collision and the goal
-    // (extending stops at the next collision or the end of the reference).
-    double free_arc = 0.0;
-    for (double t = last_collision_s; t < t_g; t += dt)
-      free_arc += (ref.position(std::min(t + dt, t_g)) - ref.position(t)).norm();
-    if (collides(t_h)) free_arc = 0.0;  // t_g is then the first free point after the collision
-    while (t_g < T && free_arc < config_.local_goal_margin_m) {
-      const double t_next = std::min(T, t_g + dt);
-      if (collides(t_next)) break;
-      free_arc += (ref.position(t_next) - ref.position(t_g)).norm();
-      t_g = t_next;
+    // The goal is the first point from t_g on that ends local_goal_margin_m of collision-free
+    // reference (counted from the last collision; looked for up to max_local_goal_extension_m past
+    // t_g, past further collisions too); the final goal, at rest, always qualifies. A goal right
+    // before the next obstacle would end the spline heading into it: its last control points,
+    // fixed by the goal's state, lie on the reference.
+    double run = 0.0, extension = 0.0, t = last_collision_s;
+    bool found = false;
+    for (Eigen::Vector3d prev = ref.position(t); t < T;) {
+      const double t_next = std::min(T, t + dt);
+      const Eigen::Vector3d p = ref.position(t_next);
+      const double step = (p - prev).norm();
+      prev = p;
+      run = collides(t_next) ? 0.0 : run + step;
+      if (t_next > t_g) extension += step;
+      t = t_next;
+      if (t >= t_g && run >= config_.local_goal_margin_m) {
+        found = true;
+        break;
+      }
+      if (extension > config_.max_local_goal_extension_m) break;
+    }
+    if (found || (t >= T && !collides(T))) {
+      t_g = t;
+    } else {
+      // None within reach: at least local_goal_margin_m of collision-free reference between the
+      // last collision and the goal (extending stops at the next collision or the end).
+      double free_arc = 0.0;
+      for (double s = last_collision_s; s < t_g; s += dt)
+        free_arc += (ref.position(std::min(s + dt, t_g)) - ref.position(s)).norm();
+      if (collides(t_h)) free_arc = 0.0;  // t_g is then the first free point after the collision
+      while (t_g < T && free_arc < config_.local_goal_margin_m) {
+        const double t_next = std::min(T, t_g + dt);
+        if (collides(t_next)) break;
+        free_arc += (ref.position(t_next) - ref.position(t_g)).norm();
+        t_g = t_next;
+      }
     }
   }
   lp.goal_time_s = t_g;

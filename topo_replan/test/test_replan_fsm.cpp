@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <cstdio>
 #include <memory>
 #include <thread>
 
@@ -23,7 +24,7 @@ ReplanFsm::Config testConfig() {
   c.reference.max_acc_mps2 = 1.5;
   c.reference.max_segment_length_m = 3.0;
   c.reference.cruise_timing = true;
-  c.replanner.local_goal_margin_m = 1.0;
+  c.replanner.local_goal_margin_m = 2.0;  // the planner node's
   return c;
 }
 
@@ -295,10 +296,10 @@ TEST(ReplanFsm, EscapesFromInsideTheClearanceThenFliesTheMission) {
 }
 
 // Seeded high-density forests like the simulation's (a 24 m x 20 m forest between a start and a
-// goal 30 m apart), the map known, the vehicle tracking perfectly: every flight reaches its goal
-// and keeps the safety clearance. Measured when written (a regression guard, not a target): 1 of 6
-// flights brakes once, 47 of 124 planning calls fail (kept trajectory or retry), velocity steps
-// between trajectories up to 0.23 m/s (the refit of topo_replanner.h failing its check).
+// goal 30 m apart), the map known, the vehicle tracking perfectly: every flight reaches its goal,
+// keeps the safety clearance and never brakes, and few planning calls fail (2 of 79 when written;
+// 47 of 124, one flight braking, with the local goal 1 m past the last collision and stopping
+// before the next one, as before topo_replanner.h's max_local_goal_extension_m).
 TEST(ReplanFsm, FliesSeededHighDensityForestsToTheirGoals) {
   int events = 0, failed = 0, braked = 0;
   for (uint32_t seed = 1; seed <= 6; ++seed) {
@@ -322,14 +323,15 @@ TEST(ReplanFsm, FliesSeededHighDensityForestsToTheirGoals) {
     EXPECT_TRUE(log.goal_reached) << "seed " << seed;
     braked += log.braked;
     EXPECT_GT(log.min_clearance, config.safety_clearance_m) << "seed " << seed;
-    expectContinuous(log.trajectories, 0.3);
+    expectContinuous(log.trajectories, 0.3);  // one step of 0.28 m/s when written (a failed refit)
     for (const FsmEvent& e : log.events) {
       ++events;
       failed += !e.published;
     }
   }
-  EXPECT_LE(braked, 1);
-  EXPECT_LT(failed, events / 2) << failed << " of " << events << " planning calls failed";
+  std::printf("forest flights: %d of %d planning calls failed, %d of 6 flights braked\n", failed, events, braked);
+  EXPECT_EQ(braked, 0);
+  EXPECT_LT(failed, events / 10) << failed << " of " << events << " planning calls failed";
 }
 
 // The node's threads: the planning thread ticks while a safety thread checks and an odometry thread

@@ -129,6 +129,10 @@ class TopoReplanner {
     /// it that is followed by this much collision-free reference (not just the first free point:
     /// a goal right behind an obstacle forces a hairpin around it) [m]. 0 in the benchmarks.
     double local_goal_margin_m = 0.0;
+    /// How far past the first free point beyond the horizon such a goal is looked for (past further
+    /// collisions of the reference); beyond it, the goal is the end of the free stretch that follows
+    /// that point, up to local_goal_margin_m long [m].
+    double max_local_goal_extension_m = 5.0;
     double reference_sample_s = 0.01;     ///< time step of the reference check, at least 1e-4 [s]
     double control_point_spacing_m = 0.35;  ///< initial spline: about one control point per this [m]
     /// A start that keeps the optimiser's clearance but not the search's (a trajectory may pass an
