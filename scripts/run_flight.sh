@@ -4,7 +4,7 @@
 # over), then plots the flight and prints the report. Exits 0 only if the report says success (every
 # goal reached, no collision).
 #
-#   run_flight.sh [--density low|medium|high] [--seed N] [--goals "x y z x y z ..."] [--start "x y z"]
+#   run_flight.sh [--density low|medium|high] [--map-style forest|walls|rings|mixed] [--seed N] [--goals "x y z x y z ..."] [--start "x y z"]
 #                 [--max-vel M/S] [--goal-timeout S] [--output-dir DIR] [--name NAME] [--rviz true|false]
 #                 [--sim-time true|false] [--timeout S] [--verbose] [--no-plot] [-- roslaunch args...]
 #
@@ -19,6 +19,7 @@ ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 WS=${WS:-$ROOT/build/ws}
 
 density=medium
+map_style=forest
 seed=1
 goals=""
 start=""
@@ -36,6 +37,7 @@ extra=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --density) density=$2; shift 2 ;;
+    --map-style) map_style=$2; shift 2 ;;
     --seed) seed=$2; shift 2 ;;
     --goals) goals=$2; shift 2 ;;
     --start) start=$2; shift 2 ;;
@@ -88,7 +90,7 @@ if [ -z "$timeout_s" ]; then
   timeout_s=$(awk -v n="$n_goals" -v g="$goal_timeout" 'BEGIN { printf "%d", n * g + 180 }')
 fi
 
-args=(density:="$density" seed:="$seed" rviz:="$rviz" sim_time:="$sim_time" monitor:=true
+args=(density:="$density" map_style:="$map_style" seed:="$seed" rviz:="$rviz" sim_time:="$sim_time" monitor:=true
       shutdown_when_done:=true output_dir:="$output_dir" name:="$name" goal_timeout:="$goal_timeout")
 [ -n "$goals" ] && args+=(goals:="$(yaml_list "$goals")")
 [ -n "$start" ] && args+=(start:="$(yaml_list "$start")")
@@ -107,7 +109,7 @@ export ROS_MASTER_URI=http://127.0.0.1:$port
 export ROS_HOSTNAME=127.0.0.1
 unset ROS_IP
 
-echo "run_flight: $name: density $density, seed $seed, ${n_goals} goals, rviz $rviz, master port $port, guard ${timeout_s} s"
+echo "run_flight: $name: density $density, style $map_style, seed $seed, ${n_goals} goals, rviz $rviz, master port $port, guard ${timeout_s} s"
 echo "run_flight: roslaunch topo_planner simulation.launch ${args[*]}"
 t0=$(date +%s)
 # Without --verbose, roslaunch's parameter summary (a few hundred lines) is left out of the console.

@@ -165,7 +165,11 @@ void PlannerServer::handle(const FsmOutput& out) {
     msg.guide_paths = e.stats.paths;
     msg.feasible_candidates = e.stats.feasible_candidates;
     event_pub_.publish(msg);
-    if (!e.published)
+    if (!e.published && e.status == ReplanStatus::kSuccess)
+      ROS_WARN_THROTTLE(1.0, "planner: %s plan discarded (%s): %s", toString(e.trigger), e.fallback.c_str(),
+                        e.fallback == "discarded_late" ? "it finished after its takeover time"
+                                                       : "a braking trajectory took over while planning");
+    else if (!e.published)
       ROS_WARN_THROTTLE(1.0, "planner: %s plan failed: %s (%s); fallback %s", toString(e.trigger), toString(e.status),
                         e.message.c_str(), e.fallback.c_str());
     else if (e.trigger == FsmEvent::Trigger::kEmergency)

@@ -382,14 +382,17 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
     ++consecutive_failures_;
     if (result.status == ReplanStatus::kSuccess)
       event.fallback = superseded ? "discarded_superseded" : "discarded_late";
+    // What the vehicle does now; a late plan keeps its label (discarded_late) unless it ends the mission.
+    const bool late = result.status == ReplanStatus::kSuccess;
     if (superseded) {
       // A braking trajectory took over while planning: the emergency stop owns the state now.
     } else if (generating) {
       const bool moving = current_ && !current_->braking && !current_->escape && t < current_->endTime();
-      event.fallback = consecutive_failures_ >= config_.max_plan_failures ? "give_up"
-                       : moving                                           ? "keep_current"
-                                                                          : "hover_retry";
-    } else {
+      if (consecutive_failures_ >= config_.max_plan_failures)
+        event.fallback = "give_up";
+      else if (!late)
+        event.fallback = moving ? "keep_current" : "hover_retry";
+    } else if (!late) {
       event.fallback = "keep_current";
     }
     // At rest too close to an obstacle for the replanner to start: a slow escape first, then (as

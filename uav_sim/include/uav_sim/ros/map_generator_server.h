@@ -16,8 +16,10 @@
 //   density              "medium"  low | medium | high: the benchmark presets of plan_env
 //   pillars_per_m2       preset    explicit density, overrides the preset [1/m^2]
 //   floating_per_m2      preset    explicit density of floating boxes [1/m^2]
-//   walls_per_m2         0         walls (thin slabs on the ground, random heading) [1/m^2]
-//   rings_per_m2         0         floating vertical rings (gates) [1/m^2]
+//   style                "forest"  forest | walls | rings | mixed: walls (0.02 per m^2), rings (0.02)
+//                                  or both (0.01 each) added to the density's obstacles
+//   walls_per_m2         style     walls (thin slabs on the ground, random heading) [1/m^2]
+//   rings_per_m2         style     floating vertical rings (gates) [1/m^2]
 //   seed                 1         random seed (>= 0)
 //   area_min_m, area_max_m  [-12, -10, 0], [12, 10, 3]  the forest area; obstacles stand from
 //                                  area_min_m.z to area_max_m.z [m]
@@ -47,7 +49,10 @@ class MapGeneratorServer {
   struct Config {
     SimScenario scenario;            ///< start, goals and resolution (/sim/*)
     std::string map_file;            ///< load this instead of generating; empty = generate
-    std::string density = "medium";  ///< low | medium | high preset (overridden by explicit densities)
+    std::string density = "medium";
+    /// forest (pillars and floating boxes) | walls (+ 0.02 walls per m^2) | rings (+ 0.02 rings per
+    /// m^2) | mixed (+ 0.01 of each)
+    std::string style = "forest";  ///< low | medium | high preset (overridden by explicit densities)
     ForestConfig forest = ForestConfig::preset(ObstacleDensity::kMedium);  ///< densities and sizes
     uint32_t seed = 1;                                                     ///< random seed of the forest
     Eigen::Vector3d area_min_m{-12.0, -10.0, 0.0};                         ///< lower corner of the forest area [m]
