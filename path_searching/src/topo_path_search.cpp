@@ -33,7 +33,8 @@ bool TopoPathSearch::Config::validate(std::string* why) const {
   return s.empty();
 }
 
-TopoSearchResult TopoPathSearch::search(const EsdfMap& map, const Eigen::Vector3d& start, const Eigen::Vector3d& goal) {
+TopoSearchResult TopoPathSearch::search(const EsdfMap& map, const Eigen::Vector3d& start,
+                                        const Eigen::Vector3d& goal, uint32_t seed_offset) {
   const auto t_start = std::chrono::steady_clock::now();
   TopoSearchResult result;
   if (!start.allFinite() || !goal.allFinite() || (goal - start).norm() < 1e-6 || !config_.validate(nullptr)) {
@@ -63,7 +64,7 @@ TopoSearchResult TopoPathSearch::search(const EsdfMap& map, const Eigen::Vector3
   }
 
   // Alg. 1, then the depth-first search.
-  std::mt19937 rng(config_.seed);
+  std::mt19937 rng(config_.seed + seed_offset);
   auto t = std::chrono::steady_clock::now();
   stats.roadmap = roadmap_.build(start, goal, checker, &rng);
   stats.roadmap_ms = msSince(t);

@@ -61,6 +61,8 @@ bool ReplanFsm::Config::validate(std::string* why) const {
     return bad("max_brake_acc_mps2 must be >= brake_acc_mps2");
   if (!(escape_clearance_m > 0.0) || !std::isfinite(escape_clearance_m)) return bad("escape_clearance_m must be positive");
   if (!(escape_speed_mps > 0.0) || !std::isfinite(escape_speed_mps)) return bad("escape_speed_mps must be positive");
+  if (!(escape_min_clearance_m > 0.0) || !(escape_min_clearance_m <= escape_clearance_m))
+    return bad("escape_min_clearance_m must be in (0, escape_clearance_m]");
   if (!(max_escape_length_m >= 0.0) || !(max_escape_length_m <= 10.0))
     return bad("max_escape_length_m must be in [0, 10]");
   if (!(emergency_margin_s >= 0.0) || !std::isfinite(emergency_margin_s)) return bad("emergency_margin_s must be >= 0");
@@ -247,12 +249,17 @@ std::optional<ExecTrajectory> ReplanFsm::escapeTrajectoryLocked(double t, const 
   }
   const double target = config_.escape_clearance_m;
   std::vector<Eigen::Vector3d> walk;
-  if (!ascendDistance(map, p0, [&](const Eigen::Vector3d& p) {
-        double d = 0.0;
-        return map.interpolate(p, &d, nullptr) && d >= target;
-      }, config_.max_escape_length_m, &walk) || walk.size() < 2) {
-    *report = "no escape: no way up the distance field to " + std::to_string(target) + " m within " +
-              std::to_string(config_.max_escape_length_m) + " m";
+  const bool reached = ascendDistance(map, p0, [&](const Eigen::Vector3d& p) {
+    double d = 0.0;
+    return map.interpolate(p, &d, nullptr) && d >= target;
+  }, config_.max_escape_length_m, &walk);
+  // A walk that stops short of the target (on a ridge between obstacles) still escapes when it
+  // ended at least escape_min_clearance_m from obstacles.
+  double d_end = -INFINITY;
+  if (!walk.empty()) map.interpolate(walk.back(), &d_end, nullptr);
+  if (walk.size() < 2 || (!reached && !(d_end >= config_.escape_min_clearance_m))) {
+    *report = "no escape: no way up the distance field to " + std::to_string(config_.escape_min_clearance_m) +
+              " m within " + std::to_string(config_.max_escape_length_m) + " m (from " + std::to_string(d0) + " m)";
     return std::nullopt;
   }
   std::vector<double> arc{0.0};
@@ -291,7 +298,7 @@ std::optional<ExecTrajectory> ReplanFsm::escapeTrajectoryLocked(double t, const 
   }
   char text[160];
   std::snprintf(text, sizeof(text), "escape: %.2f m up the distance field from %.2f m to %.2f m clearance in %.1f s",
-                length, d0, target, escape.spline.duration());
+                length, d0, d_end, escape.spline.duration());
   *report = text;
   return escape;
 }
@@ -340,6 +347,7 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
   ReplanRequest request;
   request.start = takeoverStateLocked(t_take);
   request.reference_time_s = generating ? 0.0 : referenceTimeAtLocked(t_take);
+  request.attempt = uint32_t(consecutive_failures_);  // a retry draws another roadmap
   const PolynomialTrajectory reference = reference_;
   request.reference = &reference;
   const int64_t current_id = current_ ? current_->id : -1;
@@ -402,6 +410,7 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
     std::optional<ExecTrajectory> escape;
     if (!superseded && result.status == ReplanStatus::kStartInCollision && at_rest && event.fallback != "give_up")
       escape = escapeTrajectoryLocked(t, map, &escape_report);
+    if (!escape && !escape_report.empty()) event.message += "; " + escape_report;
     if (escape) {
       escape->id = next_id_++;
       current_ = *escape;
@@ -412,11 +421,9 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
       out->trajectory = *escape;
       setState(FsmState::kEmergencyStop, out, escape_report);
     } else if (event.fallback == "give_up") {
-      if (!escape_report.empty()) event.message += "; " + escape_report;
       setState(FsmState::kWaitTarget, out, "no trajectory after " + std::to_string(consecutive_failures_) + " tries");
       consecutive_failures_ = 0;
     } else if (!superseded && !generating) {
-      if (!escape_report.empty()) event.message += "; " + escape_report;
       setState(FsmState::kExecTraj, out, "");
       collision_ahead_ = collision_ahead_ || trigger == FsmEvent::Trigger::kCollisionAhead;
     }

@@ -257,7 +257,7 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
       for (Path& path : paths) path.insert(path.begin(), lp.start);
     return paths;
   };
-  const TopoSearchResult search = search_.search(map, lp.search_start, lp.goal);
+  const TopoSearchResult search = search_.search(map, lp.search_start, lp.goal, request.attempt);
   result.stats.search = search.stats;
   result.roadmap = search.roadmap;
   result.stats.search_ms = msSince(t_search);

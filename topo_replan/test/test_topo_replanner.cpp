@@ -292,5 +292,29 @@ TEST(TopoReplanner, MovingStartsInHighDensityForests) {
   EXPECT_GT(ok, ok_old);
 }
 
+// A retry (request.attempt > 0) draws another roadmap; the same attempt gives the same result.
+TEST(TopoReplanner, RetryAttemptDrawsAnotherRoadmap) {
+  SyntheticScene scene({12.0, 8.0, 3.0});
+  scene.fill([](const Eigen::Vector3d& p) { return std::hypot(p.x() - 6.0, p.y() - 4.0) <= 0.6; });
+  const EsdfMap& map = scene.finish();
+  const PolynomialTrajectory ref = straightReference({1, 4, 1.5}, {11, 4, 1.5});
+  std::string err;
+  auto replanner = TopoReplanner::create(deterministicConfig(2), &err);
+  ASSERT_TRUE(replanner) << err;
+  ReplanRequest req;
+  req.start = ref.state(0.0);
+  req.reference = &ref;
+  const ReplanResult first = replanner->replan(map, req);
+  req.attempt = 1;
+  const ReplanResult retry = replanner->replan(map, req), again = replanner->replan(map, req);
+  ASSERT_FALSE(first.candidates.empty());
+  ASSERT_FALSE(retry.candidates.empty());
+  bool differs = first.candidates.size() != retry.candidates.size();
+  for (size_t i = 0; !differs && i < first.candidates.size(); ++i) differs = first.candidates[i].guide != retry.candidates[i].guide;
+  EXPECT_TRUE(differs);
+  ASSERT_EQ(retry.candidates.size(), again.candidates.size());
+  for (size_t i = 0; i < retry.candidates.size(); ++i) EXPECT_EQ(retry.candidates[i].guide, again.candidates[i].guide);
+}
+
 }  // namespace
 }  // namespace topo_planner

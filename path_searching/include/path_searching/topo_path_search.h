@@ -63,7 +63,9 @@ class TopoPathSearch {
   explicit TopoPathSearch(const Config& config) : config_(config), roadmap_(config.roadmap) {}
   const Config& config() const { return config_; }
 
-  TopoSearchResult search(const EsdfMap& map, const Eigen::Vector3d& start, const Eigen::Vector3d& goal);
+  /// seed_offset is added to Config::seed: a caller retrying the same problem draws another roadmap.
+  TopoSearchResult search(const EsdfMap& map, const Eigen::Vector3d& start, const Eigen::Vector3d& goal,
+                          uint32_t seed_offset = 0);
 
  private:
   Config config_;

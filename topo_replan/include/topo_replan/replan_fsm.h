@@ -119,6 +119,9 @@ class ReplanFsm {
     /// A vehicle at rest that the replanner refuses as kStartInCollision first moves up the distance
     /// field (plan_env ascendDistance) until it is this far from obstacles (interpolated ESDF) [m].
     double escape_clearance_m = 0.45;
+    /// A walk that stops short of escape_clearance_m (a ridge between obstacles) is flown when it
+    /// ends at least this far from obstacles (above the replanner's start clearances) [m].
+    double escape_min_clearance_m = 0.35;
     double escape_speed_mps = 0.5;    ///< peak speed of the escape [m/s]
     double max_escape_length_m = 1.0; ///< no escape when the way out is longer than this [m]; 0: never
 

@@ -61,6 +61,9 @@ struct ReplanRequest {
   FlatState start;                                ///< current state (its position, velocity, acceleration)
   const PolynomialTrajectory* reference = nullptr;  ///< the global reference
   double reference_time_s = 0.0;                  ///< time on the reference where the local segment begins
+  /// Failed attempts at this problem so far: the search is seeded with its seed + attempt, so a
+  /// retry from the same state draws another roadmap (the result is still a function of the input).
+  uint32_t attempt = 0;
 };
 
 /// The local replanning problem every method starts from (the replanner and the baselines alike):
