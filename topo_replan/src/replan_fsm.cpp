@@ -156,7 +156,7 @@ FlatState ReplanFsm::takeoverStateLocked(double t_takeover) const {
 }
 
 double ReplanFsm::referenceTimeAtLocked(double t) const {
-  if (!current_ || current_->braking || current_->escape) return 0.0;
+  if (!current_ || current_->manoeuvre()) return 0.0;
   const double d = current_->spline.duration();
   const double frac = d > 0.0 ? std::clamp((t - current_->start_time_s) / d, 0.0, 1.0) : 1.0;
   const double estimate = current_->reference_start_s + frac * (current_->reference_end_s - current_->reference_start_s);
@@ -388,14 +388,13 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
     setState(FsmState::kExecTraj, out, "");
   } else {
     ++consecutive_failures_;
-    if (result.status == ReplanStatus::kSuccess)
-      event.fallback = superseded ? "discarded_superseded" : "discarded_late";
-    // What the vehicle does now; a late plan keeps its label (discarded_late) unless it ends the mission.
+    // What the vehicle does now; a discarded plan keeps its label unless it ends the mission.
     const bool late = result.status == ReplanStatus::kSuccess;
+    if (late) event.fallback = superseded ? "discarded_superseded" : "discarded_late";
     if (superseded) {
       // A braking trajectory took over while planning: the emergency stop owns the state now.
     } else if (generating) {
-      const bool moving = current_ && !current_->braking && !current_->escape && t < current_->endTime();
+      const bool moving = current_ && !current_->manoeuvre() && t < current_->endTime();
       if (consecutive_failures_ >= config_.max_plan_failures)
         event.fallback = "give_up";
       else if (!late)
@@ -510,7 +509,7 @@ FsmOutput ReplanFsm::checkSafety(double t, const EsdfMap& map) {
   std::lock_guard<std::mutex> lock(mutex_);
   FsmOutput out;
   // Braking and escapes were checked when made and are not replanned (they end at rest).
-  if (!current_ || current_->braking || current_->escape || !std::isfinite(t) || state_ == FsmState::kInit) return out;
+  if (!current_ || current_->manoeuvre() || !std::isfinite(t) || state_ == FsmState::kInit) return out;
   if (t > current_->endTime() && state_ == FsmState::kWaitTarget) return out;
   // Time to stop from the current speed, plus the margin: a collision (or the end of a trajectory
   // that ends moving, past which nothing is planned) closer than that cannot wait for a replan.

@@ -4,7 +4,6 @@
 #include <cstdio>
 #include <memory>
 
-#include "plan_env/map_generator.h"
 #include "plan_env/synthetic_scene.h"
 #include "topo_replan/topo_replanner.h"
 
@@ -243,16 +242,8 @@ TEST(TopoReplanner, LocalGoalSkipsPastAnObstacleRightBehindTheFirst) {
 TEST(TopoReplanner, MovingStartsInHighDensityForests) {
   int total = 0, ok = 0, ok_old = 0;
   for (uint32_t seed = 1; seed <= 8; ++seed) {
-    SyntheticScene scene(Eigen::Vector3d(40.0, 24.0, 3.4), 0.1, Eigen::Vector3d(-20.0, -12.0, 0.3));
     const Eigen::Vector3d start(-15, 0, 1), goal(15.0, -4.0 + 0.3 * seed, 1.3);
-    ForestConfig forest = ForestConfig::preset(ObstacleDensity::kHigh);
-    forest.keep_free = {start, goal};
-    forest.keep_free_radius_m = 1.5;
-    forest.ground_z_m = 0.3;
-    forest.pillar_height_m = 3.4;
-    generateForest(forest, seed, scene.occupancy.get());
-    scene.fill([](const Eigen::Vector3d& p) { return std::abs(p.x()) > 12.0 || std::abs(p.y()) > 10.0; },
-               VoxelState::kFree);
+    SyntheticScene scene = SyntheticScene::simulationForest(ObstacleDensity::kHigh, seed, {start, goal});
     const EsdfMap& map = scene.finish();
     ReferenceConfig rc;  // the planner node's reference: 0.75 x the optimiser's limits, cruising
     rc.max_vel_mps = 2.25;

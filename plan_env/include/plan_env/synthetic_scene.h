@@ -47,6 +47,21 @@ struct SyntheticScene {
   }
   /// A seeded random forest (map_generator.h) over the whole window.
   void forest(ObstacleDensity density, uint32_t seed) { generateForest(ForestConfig::preset(density), seed, occupancy.get()); }
+  /// The closed-loop simulation's layout: a window of 40 x 24 x 3.4 m from (-20, -12, 0.3) with a
+  /// seeded forest only over |x| <= 12, |y| <= 10, kept 1.5 m clear of `keep_free` (start, goals).
+  static SyntheticScene simulationForest(ObstacleDensity density, uint32_t seed,
+                                         const std::vector<Eigen::Vector3d>& keep_free) {
+    SyntheticScene scene(Eigen::Vector3d(40.0, 24.0, 3.4), 0.1, Eigen::Vector3d(-20.0, -12.0, 0.3));
+    ForestConfig forest = ForestConfig::preset(density);
+    forest.keep_free = keep_free;
+    forest.keep_free_radius_m = 1.5;
+    forest.ground_z_m = 0.3;
+    forest.pillar_height_m = 3.4;
+    generateForest(forest, seed, scene.occupancy.get());
+    scene.fill([](const Eigen::Vector3d& p) { return std::abs(p.x()) > 12.0 || std::abs(p.y()) > 10.0; },
+               VoxelState::kFree);
+    return scene;
+  }
   /// Call after carving: computes the ESDF (2 m truncation).
   const EsdfMap& finish() {
     EsdfMap::Config c;

@@ -70,6 +70,8 @@ struct ExecTrajectory {
   bool braking = false;            ///< an emergency braking trajectory
   bool escape = false;             ///< a slow manoeuvre out of an obstacle's clearance, from rest to rest
   double endTime() const { return start_time_s + spline.duration(); }
+  /// Braking or escape: checked when made, ends at rest, not on the reference, not replanned.
+  bool manoeuvre() const { return braking || escape; }
 };
 
 /// What one call did, for logging and the ReplanEvent message.
