@@ -301,6 +301,11 @@ MappingServer::Stats MappingServer::stats() const {
   std::shared_lock<std::shared_mutex> lock(map_mutex_);
   Stats s = stats_;
   s.frames_refused = frames_refused_;
+  std::lock_guard<std::mutex> pose_lock(pose_mutex_);
+  if (have_pose_) {
+    s.pose_stamp_s = latest_pose_stamp_.toSec();
+    s.pose_arrival_s = latest_pose_arrival_s_;
+  }
   return s;
 }
 
@@ -364,6 +369,7 @@ void MappingServer::poseCallback(const geometry_msgs::PoseStampedConstPtr& pose)
   std::lock_guard<std::mutex> lock(pose_mutex_);
   have_pose_ = true;
   latest_pose_stamp_ = pose->header.stamp;
+  latest_pose_arrival_s_ = ros::Time::now().toSec();
   latest_camera_position_ = T.translation();
 }
 
@@ -373,6 +379,7 @@ void MappingServer::odomCallback(const nav_msgs::OdometryConstPtr& odom) {
   std::lock_guard<std::mutex> lock(pose_mutex_);
   have_pose_ = true;
   latest_pose_stamp_ = odom->header.stamp;
+  latest_pose_arrival_s_ = ros::Time::now().toSec();
   latest_camera_position_ = T.translation();
 }
 
@@ -387,7 +394,7 @@ void MappingServer::fuseDepth(const sensor_msgs::Image& image, const Eigen::Isom
                       image.data.size());
     return;
   }
-  integrate("depth image", T_world_camera.translation(), [&](OccupancyMap& map) {
+  integrate("depth image", image.header.stamp, T_world_camera.translation(), [&](OccupancyMap& map) {
     return map.fuseDepthImage(view, config_.camera, T_world_camera);
   });
 }
@@ -428,7 +435,7 @@ void MappingServer::cloudCallback(const sensor_msgs::PointCloud2ConstPtr& cloud)
     ROS_WARN_THROTTLE(1.0, "mapping: point cloud refused: %s", toString(status));
     return;
   }
-  integrate("point cloud", origin, [&](OccupancyMap& map) { return map.fusePointCloud(points, origin); });
+  integrate("point cloud", cloud->header.stamp, origin, [&](OccupancyMap& map) { return map.fusePointCloud(points, origin); });
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -451,7 +458,7 @@ VoxelBox MappingServer::recenterLocked(const Eigen::Vector3d& p) {
   return moved;
 }
 
-void MappingServer::integrate(const char* source, const Eigen::Vector3d& sensor_position,
+void MappingServer::integrate(const char* source, const ros::Time& stamp, const Eigen::Vector3d& sensor_position,
                               const std::function<FusionResult(OccupancyMap&)>& fuse) {
   std::unique_lock<std::shared_mutex> lock(map_mutex_);
   VoxelBox changed;
@@ -464,6 +471,11 @@ void MappingServer::integrate(const char* source, const Eigen::Vector3d& sensor_
   const auto t1 = std::chrono::steady_clock::now();
   esdf_->update(changed);
   const double esdf_ms = msSince(t1);
+  // A frame that reached the map proves the sensor alive, also when it held no valid return.
+  if (result.status == MapStatus::kSuccess || result.status == MapStatus::kNoValidData) {
+    stats_.depth_stamp_s = stamp.toSec();
+    stats_.depth_arrival_s = ros::Time::now().toSec();
+  }
   if (result.status != MapStatus::kSuccess) {
     ++frames_refused_;
     lock.unlock();

@@ -4,9 +4,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <random>
 
 #include "plan_manage/trajectory_conversions.h"
 #include "topo_planner/Bspline.h"
+#include "topo_planner/PlannerHeartbeat.h"
 #include "topo_planner/ReplanEvent.h"
 #include "uav_sim/ros/param_reader.h"
 
@@ -25,6 +27,9 @@ std::unique_ptr<PlannerServer> PlannerServer::create(const ros::NodeHandle& nh, 
 
   PlannerServer& s = *server;
   ros::NodeHandle pnh = s.nh_;
+  std::random_device entropy;
+  s.session_ = (uint64_t(entropy()) << 32) ^ uint64_t(entropy()) ^ uint64_t(ros::WallTime::now().toNSec());
+  s.heartbeat_pub_ = pnh.advertise<PlannerHeartbeat>("heartbeat", 10);
   s.bspline_pub_ = pnh.advertise<Bspline>("bspline", 10);
   s.event_pub_ = pnh.advertise<ReplanEvent>("replan_event", 100);
   s.reference_pub_ = pnh.advertise<nav_msgs::Path>("reference_path", 1, true);
@@ -61,6 +66,12 @@ PlannerServer::~PlannerServer() {
 }
 
 void PlannerServer::odomCallback(const nav_msgs::OdometryConstPtr& msg) {
+  const std::string& frame = msg->header.frame_id;
+  if (!frame.empty() && frame != config_.frame_id && frame != "/" + config_.frame_id) {
+    ROS_WARN_THROTTLE(2.0, "planner: odometry in frame '%s' ignored (expected '%s')", frame.c_str(),
+                      config_.frame_id.c_str());
+    return;
+  }
   const auto& p = msg->pose.pose.position;
   const auto& q = msg->pose.pose.orientation;
   const auto& v = msg->twist.twist.linear;
@@ -75,12 +86,9 @@ void PlannerServer::odomCallback(const nav_msgs::OdometryConstPtr& msg) {
     velocity = orientation.normalized() * velocity;
   }
   const double t = msg->header.stamp.toSec();
-  if (!fsm_->setOdometry(t, Eigen::Vector3d(p.x, p.y, p.z), velocity)) {
-    ROS_WARN_THROTTLE(2.0, "planner: odometry with NaN/inf values ignored");
-    return;
-  }
-  last_odom_time_ = ros::Time::now().toSec();
-  if (!config_.goals.empty() && !initial_goals_sent_.exchange(true)) submitGoals(config_.goals, "parameter goals_m");
+  std::string why;
+  if (!fsm_->setOdometry(t, Eigen::Vector3d(p.x, p.y, p.z), velocity, ros::Time::now().toSec(), &why))
+    ROS_WARN_THROTTLE(2.0, "planner: odometry ignored: %s", why.c_str());
 }
 
 void PlannerServer::goalCallback(const geometry_msgs::PoseStampedConstPtr& msg) {
@@ -118,17 +126,36 @@ void PlannerServer::submitGoals(const std::vector<Eigen::Vector3d>& goals, const
   ROS_INFO("planner: %s: %zu goal(s), last (%.2f, %.2f, %.2f)", source, goals.size(), g.x(), g.y(), g.z());
 }
 
-bool PlannerServer::odometryFresh(double now) const {
-  const double last = last_odom_time_;
-  return last >= 0.0 && now - last <= config_.odom_timeout_s;
+void PlannerServer::feedDepth() {
+  const MappingServer::Stats stats = mapping_->stats();
+  if (stats.depth_stamp_s >= 0.0) fsm_->setDepthFused(stats.depth_stamp_s, stats.depth_arrival_s);
+}
+
+void PlannerServer::publishHeartbeat(double now) {
+  const InputHealth health = fsm_->inputHealth(now);
+  PlannerHeartbeat hb;
+  hb.header.stamp = ros::Time::now();
+  hb.header.frame_id = config_.frame_id;
+  hb.planner_session = session_;
+  hb.fsm_state = toString(fsm_->state());
+  hb.inputs_ok = health.ok;
+  hb.inputs_status = health.why;
+  hb.depth_age_s = health.depth_age_s;
+  hb.odom_age_s = health.odom_age_s;
+  heartbeat_pub_.publish(hb);
+  if (!health.ok && fsm_->state() != FsmState::kInit)
+    ROS_WARN_THROTTLE(2.0, "planner: inputs stale: %s (goals refused, no planning, a moving vehicle stops)",
+                      health.why.c_str());
 }
 
 void PlannerServer::planTimer(const ros::TimerEvent&) {
   const double now = ros::Time::now().toSec();
-  if (!odometryFresh(now)) {
-    if (last_odom_time_ >= 0.0)
-      ROS_WARN_THROTTLE(2.0, "planner: odometry older than %.2f s; not planning", config_.odom_timeout_s);
-    return;
+  feedDepth();
+  // The mission of the parameter goals_m, once the inputs allow it.
+  if (!config_.goals.empty() && !initial_goals_sent_ && fsm_->inputHealth(now).ok &&
+      fsm_->setGoals(config_.goals) == GoalStatus::kAccepted) {
+    initial_goals_sent_ = true;
+    ROS_INFO("planner: parameter goals_m: %zu goal(s)", config_.goals.size());
   }
   FsmOutput out;
   mapping_->readMaps([&](const OccupancyMap&, const EsdfMap& esdf) {
@@ -139,15 +166,22 @@ void PlannerServer::planTimer(const ros::TimerEvent&) {
 
 void PlannerServer::safetyTimer(const ros::TimerEvent&) {
   const double now = ros::Time::now().toSec();
+  feedDepth();
   FsmOutput out;
   mapping_->readMaps([&](const OccupancyMap&, const EsdfMap& esdf) { out = fsm_->checkSafety(now, esdf); });
   handle(out);
+  publishHeartbeat(now);
+  const int jumps = fsm_->timeJumps();
+  if (jumps != time_jumps_logged_) {
+    ROS_WARN("planner: ROS time jumped (%d so far): timing shifted, replanning from the current state", jumps);
+    time_jumps_logged_ = jumps;
+  }
 }
 
 void PlannerServer::handle(const FsmOutput& out) {
   if (!out.message.empty()) ROS_INFO("planner: %s", out.message.c_str());
   if (out.new_reference) publishReference();
-  if (out.trajectory) bspline_pub_.publish(toMsg(*out.trajectory, config_.frame_id));
+  if (out.trajectory) bspline_pub_.publish(toMsg(*out.trajectory, config_.frame_id, session_));
   if (out.event) {
     const FsmEvent& e = *out.event;
     ReplanEvent msg;
@@ -285,14 +319,14 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("goal_height_m", c.goal_height_m);
   r.read("plan_period_s", c.plan_period_s);
   r.read("safety_period_s", c.safety_period_s);
-  r.read("odom_timeout_s", c.odom_timeout_s);
+  ReplanFsm::Config& f = c.fsm;
+  r.read("odom_timeout_s", f.odom_timeout_s);
   r.read("vis_sample_s", c.vis_sample_s);
   std::vector<double> goals;
   r.read("goals_m", goals);
   if (goals.size() % 3 != 0) r.errors() << "goals_m must hold x, y, z triples; ";
   for (size_t i = 0; i + 2 < goals.size(); i += 3) c.goals.emplace_back(goals[i], goals[i + 1], goals[i + 2]);
 
-  ReplanFsm::Config& f = c.fsm;
   r.read("fsm/takeover_delay_s", f.takeover_delay_s);
   r.read("fsm/max_takeover_delay_s", f.max_takeover_delay_s);
   r.read("fsm/replan_interval_s", f.replan_interval_s);
@@ -308,6 +342,14 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("fsm/escape_min_clearance_m", f.escape_min_clearance_m);
   r.read("fsm/escape_speed_mps", f.escape_speed_mps);
   r.read("fsm/max_escape_length_m", f.max_escape_length_m);
+  r.read("fsm/commit_to_known_space", f.commit_to_known_space);
+  r.read("fsm/known_start_radius_m", f.known_start_radius_m);
+  r.read("fsm/commit_margin_m", f.commit_margin_m);
+  r.read("fsm/depth_timeout_s", f.depth_timeout_s);
+  r.read("fsm/odom_max_age_s", f.odom_max_age_s);
+  r.read("fsm/max_tracking_error_m", f.max_tracking_error_m);
+  r.read("fsm/time_jump_threshold_s", f.time_jump_threshold_s);
+  r.read("fsm/waypoint_reached_radius_m", f.waypoint_reached_radius_m);
 
   // Limits: the optimiser's are the vehicle's; the reference flies below them (reference_speed_ratio)
   // so detours around obstacles need no time stretching.
@@ -341,6 +383,11 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("search/max_paths", p.search.max_paths);
   r.read("search/max_length_ratio", p.search.max_length_ratio);
   r.read("search/max_time_s", p.search.roadmap.max_time_s);
+  // Unknown space, per consumer: the search, the optimiser and A* plan through it optimistically by
+  // default (so the planner explores); the committed part never enters it (fsm/commit_to_known_space).
+  r.read("search/unknown_is_free", p.search.unknown_is_free);
+  r.read("optimizer/unknown_is_free", p.optimizer.unknown_is_free);
+  r.read("astar/unknown_is_free", p.astar.unknown_is_free);
   p.search.keep_raw_paths = true;  // the roadmap for rviz (~vis/roadmap)
   r.read("search/keep_roadmap", p.search.keep_raw_paths);
   r.read("optimizer/clearance_m", p.optimizer.clearance_m);
@@ -352,7 +399,6 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   std::string why;
   std::string range;
   if (!(c.plan_period_s > 0.0) || !(c.safety_period_s > 0.0)) range += "plan_period_s and safety_period_s must be positive; ";
-  if (!(c.odom_timeout_s > 0.0)) range += "odom_timeout_s must be positive; ";
   if (!(c.vis_sample_s > 0.0)) range += "vis_sample_s must be positive; ";
   if (!std::isfinite(c.goal_height_m)) range += "goal_height_m must be finite; ";
   if (!f.validate(&why)) range += why + "; ";

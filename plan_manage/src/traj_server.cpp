@@ -13,6 +13,8 @@ namespace topo_planner {
 TrajServer::TrajServer(const ros::NodeHandle& nh, const Config& config)
     : nh_(nh), config_(config), generator_(config.generator) {
   bspline_sub_ = nh_.subscribe("bspline", 10, &TrajServer::bsplineCallback, this, ros::TransportHints().tcpNoDelay());
+  heartbeat_sub_ =
+      nh_.subscribe("heartbeat", 10, &TrajServer::heartbeatCallback, this, ros::TransportHints().tcpNoDelay());
   odom_sub_ = nh_.subscribe("odometry", 1, &TrajServer::odomCallback, this);
   cmd_pub_ = nh_.advertise<PositionCommand>("position_cmd", 10);
   pose_pub_ = nh_.advertise<geometry_msgs::PoseStamped>("setpoint_pose", 10);
@@ -21,41 +23,96 @@ TrajServer::TrajServer(const ros::NodeHandle& nh, const Config& config)
 }
 
 void TrajServer::bsplineCallback(const BsplineConstPtr& msg) {
-  UniformBspline spline;
-  double start = 0.0;
+  ReceivedTrajectory r;
   std::string why;
   if (!msg->header.frame_id.empty() && msg->header.frame_id != config_.frame_id) {
     ROS_WARN_THROTTLE(1.0, "traj_server: B-spline in frame '%s' ignored (expected '%s')", msg->header.frame_id.c_str(),
                       config_.frame_id.c_str());
     return;
   }
-  if (!fromMsg(*msg, &spline, &start, &why)) {
+  if (!fromMsg(*msg, &r, &why)) {
     ROS_WARN_THROTTLE(1.0, "traj_server: invalid B-spline %ld ignored: %s", long(msg->trajectory_id), why.c_str());
     return;
   }
   std::lock_guard<std::mutex> lock(mutex_);
-  if (!generator_.add(msg->trajectory_id, start, spline))
-    ROS_WARN_THROTTLE(1.0, "traj_server: B-spline %ld ignored (not newer than the last one)", long(msg->trajectory_id));
+  const int64_t sessions = generator_.stats().session_changes;
+  if (!generator_.add(r.planner_session, r.id, r.start_time_s, r.spline, r.heading_target)) {
+    ROS_WARN_THROTTLE(1.0, "traj_server: B-spline %ld of planner session %lu ignored (not newer than the last one)",
+                      long(r.id), (unsigned long)r.planner_session);
+  } else if (generator_.stats().session_changes > sessions) {
+    ROS_WARN("traj_server: trajectory %ld from a new planner session %lu (planner restarted): accepted", long(r.id),
+             (unsigned long)r.planner_session);
+  }
+}
+
+void TrajServer::heartbeatCallback(const PlannerHeartbeatConstPtr& msg) {
+  // Liveness is the arrival (ROS time now, the time base of the samples), not the sender's stamp.
+  const double now = ros::Time::now().toSec();
+  std::lock_guard<std::mutex> lock(mutex_);
+  generator_.noteHeartbeat(now);
+  if (have_heartbeat_ && msg->planner_session != heartbeat_session_)
+    ROS_INFO("traj_server: planner heartbeat from a new session %lu (planner restarted)",
+             (unsigned long)msg->planner_session);
+  heartbeat_session_ = msg->planner_session;
+  have_heartbeat_ = true;
 }
 
 void TrajServer::odomCallback(const nav_msgs::OdometryConstPtr& msg) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  if (have_yaw_) return;
+  if (!msg->header.frame_id.empty() && msg->header.frame_id != config_.frame_id) {
+    ROS_WARN_THROTTLE(5.0, "traj_server: odometry in frame '%s' ignored (expected '%s')", msg->header.frame_id.c_str(),
+                      config_.frame_id.c_str());
+    return;
+  }
   const auto& q = msg->pose.pose.orientation;
+  const auto& p = msg->pose.pose.position;
   const double yaw = std::atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z));
-  if (!std::isfinite(yaw)) return;
-  generator_.setYaw(yaw);
-  have_yaw_ = true;
-  odom_sub_.shutdown();
+  const Eigen::Vector3d position(p.x, p.y, p.z);
+  if (!std::isfinite(yaw) || !position.allFinite()) return;
+  std::lock_guard<std::mutex> lock(mutex_);
+  // Needed until the first trajectory starts (initial yaw, hold pose); not afterwards.
+  if (generator_.started()) {
+    odom_sub_.shutdown();
+    return;
+  }
+  generator_.setVehiclePose(position, yaw);
+}
+
+void TrajServer::logEvents(const SetpointGenerator::Stats& before, const SetpointGenerator::Stats& after,
+                           const Setpoint& sp) const {
+  const auto& g = config_.generator;
+  if (after.backward_time_jumps + after.forward_time_jumps > before.backward_time_jumps + before.forward_time_jumps)
+    ROS_WARN_THROTTLE(1.0,
+                      "traj_server: ROS time jumped %s by %.3f s: trajectories shifted so the setpoint goes on where "
+                      "it was (%ld backward, %ld forward jumps so far)",
+                      after.backward_time_jumps > before.backward_time_jumps ? "backwards" : "forwards",
+                      std::abs(after.last_time_jump_s), long(after.backward_time_jumps), long(after.forward_time_jumps));
+  if (after.watchdog_stops > before.watchdog_stops)
+    ROS_WARN_THROTTLE(1.0,
+                      "traj_server: watchdog: no planner heartbeat or trajectory for %.2f s (limit %.2f s) while "
+                      "moving at %.2f m/s: stopping along trajectory %ld's path at %.1f m/s^2, then holding "
+                      "(%ld queued dropped)",
+                      after.last_input_age_s, g.heartbeat_timeout_s, after.last_stop_speed_mps, long(sp.trajectory_id),
+                      g.stop_acc_mps2, long(after.dropped_on_watchdog - before.dropped_on_watchdog));
+  if (after.end_stops > before.end_stops)
+    ROS_WARN_THROTTLE(1.0,
+                      "traj_server: trajectory %ld ended moving at %.2f m/s with no successor: stopping straight on at "
+                      "%.1f m/s^2, then holding",
+                      long(sp.trajectory_id), after.last_stop_speed_mps, g.stop_acc_mps2);
 }
 
 void TrajServer::timerCallback(const ros::TimerEvent&) {
   const ros::Time now = ros::Time::now();
   Setpoint sp;
+  SetpointGenerator::Stats before, after;
+  bool ok = false;
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    if (!generator_.sample(now.toSec(), &sp)) return;
+    before = generator_.stats();
+    ok = generator_.sample(now.toSec(), &sp);
+    after = generator_.stats();
   }
+  logEvents(before, after, sp);
+  if (!ok) return;
   cmd_pub_.publish(toMsg(sp, now, config_.frame_id));
   geometry_msgs::PoseStamped pose;
   pose.header.stamp = now;
@@ -77,15 +134,27 @@ void TrajServer::timerCallback(const ros::TimerEvent&) {
 
 bool readTrajServerParams(const ros::NodeHandle& nh, TrajServer::Config* config) {
   TrajServer::Config& c = *config;
+  SetpointGenerator::Config& g = c.generator;
   ParamReader r(nh);
   r.read("frame_id", c.frame_id);
   r.read("rate_hz", c.rate_hz);
-  r.read("max_yaw_rate_radps", c.generator.max_yaw_rate_radps);
-  r.read("yaw_lookahead_s", c.generator.lookahead_s);
-  r.read("yaw_min_displacement_m", c.generator.min_displacement_m);
+  r.read("max_yaw_rate_radps", g.max_yaw_rate_radps);
+  r.read("yaw_lookahead_s", g.lookahead_s);
+  r.read("yaw_min_displacement_m", g.min_displacement_m);
+  r.read("heartbeat_timeout_s", g.heartbeat_timeout_s);
+  r.read("stop_acc_mps2", g.stop_acc_mps2);
+  r.read("stop_jerk_mps3", g.stop_jerk_mps3);
+  r.read("max_time_step_s", g.max_time_step_s);
+  r.read("hold_before_first_trajectory", g.hold_before_first_trajectory);
   std::string why, range;
-  if (!(c.rate_hz > 0.0 && c.rate_hz <= 1000.0)) range += "rate_hz must be in (0, 1000]; ";
-  if (!c.generator.validate(&why)) range += why + "; ";
+  if (c.frame_id.empty()) range += "frame_id must not be empty; ";
+  if (!(c.rate_hz > 0.0 && c.rate_hz <= 1000.0)) {
+    range += "rate_hz must be in (0, 1000]; ";
+  } else {
+    g.nominal_period_s = 1.0 / c.rate_hz;
+    if (!g.validate(&why)) range += why + "; ";
+  }
+  if (!range.empty()) range.resize(range.size() - 2);
   return r.finish("traj_server", range);
 }
 

@@ -1,4 +1,5 @@
-// Trajectory server node: B-splines in, 100 Hz setpoints out (plan_manage/traj_server.h).
+// Trajectory server node: B-splines and planner heartbeats in, 100 Hz setpoints out, with the watchdog
+// and time-jump handling (plan_manage/traj_server.h).
 #include <ros/ros.h>
 
 #include "plan_manage/traj_server.h"

@@ -5,10 +5,11 @@
 
 namespace topo_planner {
 
-Bspline toMsg(const ExecTrajectory& trajectory, const std::string& frame_id) {
+Bspline toMsg(const ExecTrajectory& trajectory, const std::string& frame_id, uint64_t planner_session) {
   Bspline msg;
   msg.header.frame_id = frame_id;
   msg.header.stamp = ros::Time(std::max(0.0, trajectory.start_time_s));
+  msg.planner_session = planner_session;
   msg.trajectory_id = trajectory.id;
   msg.start_time = msg.header.stamp;
   msg.order = trajectory.spline.degree();
@@ -20,10 +21,16 @@ Bspline toMsg(const ExecTrajectory& trajectory, const std::string& frame_id) {
     msg.control_points[size_t(i)].y = q(i, 1);
     msg.control_points[size_t(i)].z = q(i, 2);
   }
+  msg.has_heading_target = trajectory.has_heading_target;
+  if (trajectory.has_heading_target) {
+    msg.heading_target.x = trajectory.heading_target.x();
+    msg.heading_target.y = trajectory.heading_target.y();
+    msg.heading_target.z = trajectory.heading_target.z();
+  }
   return msg;
 }
 
-bool fromMsg(const Bspline& msg, UniformBspline* spline, double* start_time_s, std::string* why) {
+bool fromMsg(const Bspline& msg, ReceivedTrajectory* out, std::string* why) {
   if (msg.control_points.size() > 100000) {
     if (why) *why = "more than 100000 control points";
     return false;
@@ -37,8 +44,19 @@ bool fromMsg(const Bspline& msg, UniformBspline* spline, double* start_time_s, s
     if (why) *why = "order below 3 (no continuous acceleration)";
     return false;
   }
-  *spline = s;
-  *start_time_s = msg.start_time.toSec();
+  std::optional<Eigen::Vector3d> heading_target;
+  if (msg.has_heading_target) {
+    heading_target = Eigen::Vector3d(msg.heading_target.x, msg.heading_target.y, msg.heading_target.z);
+    if (!heading_target->allFinite()) {
+      if (why) *why = "non-finite heading target";
+      return false;
+    }
+  }
+  out->planner_session = msg.planner_session;
+  out->id = msg.trajectory_id;
+  out->start_time_s = msg.start_time.toSec();
+  out->spline = s;
+  out->heading_target = heading_target;
   return true;
 }
 

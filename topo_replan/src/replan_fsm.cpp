@@ -3,8 +3,61 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <utility>
 
 namespace topo_planner {
+namespace {
+
+// A trajectory's path from time tau0 on, by arc length: where a stop along the path goes. Past the
+// path's end it continues straight along the last direction (a stop longer than the path).
+class PathByLength {
+ public:
+  PathByLength(const UniformBspline& spline, double tau0, double dt) {
+    const double T = spline.duration();
+    for (double tau = std::clamp(tau0, 0.0, T);; tau = std::min(T, tau + dt)) {
+      const Eigen::Vector3d p = spline.evaluate(tau);
+      s_.push_back(p_.empty() ? 0.0 : s_.back() + (p - p_.back()).norm());
+      p_.push_back(p);
+      if (tau >= T) break;
+    }
+    direction_ = spline.derivative().evaluate(T);
+    for (size_t i = p_.size(); direction_.norm() < 1e-6 && i >= 2; --i) direction_ = p_[i - 1] - p_[i - 2];
+    if (direction_.norm() > 1e-9) direction_.normalize();
+  }
+  void setDirection(const Eigen::Vector3d& d) {
+    if (d.norm() > 1e-9) direction_ = d.normalized();
+  }
+  double length() const { return s_.back(); }
+  Eigen::Vector3d at(double s) const {
+    if (s >= s_.back()) return p_.back() + (s - s_.back()) * direction_;
+    const size_t i = size_t(std::upper_bound(s_.begin(), s_.end(), s) - s_.begin());
+    if (i == 0) return p_.front();
+    const double span = s_[i] - s_[i - 1];
+    const double f = span > 0.0 ? (s - s_[i - 1]) / span : 0.0;
+    return p_[i - 1] + f * (p_[i] - p_[i - 1]);
+  }
+
+ private:
+  std::vector<double> s_;
+  std::vector<Eigen::Vector3d> p_;
+  Eigen::Vector3d direction_ = Eigen::Vector3d::Zero();
+};
+
+// Positions every `interval` of a stop from speed v along `path` at deceleration a, preceded by
+// `head` (positions at the same interval, the first being the start).
+std::vector<Eigen::Vector3d> stopPoints(const PathByLength& path, double s0, double v, double a, double* interval) {
+  const double T = v / a;
+  const int n = std::max(4, int(std::ceil(T / 0.05)));
+  *interval = T > 0.0 ? T / n : 0.1;
+  std::vector<Eigen::Vector3d> points;
+  for (int k = 0; k <= n; ++k) {
+    const double tau = k * *interval;
+    points.push_back(path.at(s0 + (T > 0.0 ? v * tau - 0.5 * a * tau * tau : 0.0)));
+  }
+  return points;
+}
+
+}  // namespace
 
 const char* toString(FsmState state) {
   switch (state) {
@@ -26,6 +79,7 @@ const char* toString(GoalStatus status) {
     case GoalStatus::kGoalInObstacle: return "kGoalInObstacle";
     case GoalStatus::kGoalOutOfMap: return "kGoalOutOfMap";
     case GoalStatus::kReferenceFailed: return "kReferenceFailed";
+    case GoalStatus::kInputsStale: return "kInputsStale";
   }
   return "unknown";
 }
@@ -37,6 +91,7 @@ const char* toString(FsmEvent::Trigger trigger) {
     case FsmEvent::Trigger::kPeriodic: return "periodic";
     case FsmEvent::Trigger::kRetry: return "retry";
     case FsmEvent::Trigger::kEmergency: return "emergency";
+    case FsmEvent::Trigger::kTimeJump: return "time_jump";
   }
   return "unknown";
 }
@@ -70,6 +125,16 @@ bool ReplanFsm::Config::validate(std::string* why) const {
   if (!(goal_tolerance_m > 0.0) || !std::isfinite(goal_tolerance_m)) return bad("goal_tolerance_m must be positive");
   if (!(stopped_speed_mps > 0.0) || !std::isfinite(stopped_speed_mps)) return bad("stopped_speed_mps must be positive");
   if (max_plan_failures < 1) return bad("max_plan_failures must be >= 1");
+  if (!(known_start_radius_m >= 0.0) || !(known_start_radius_m <= 2.0)) return bad("known_start_radius_m must be in [0, 2]");
+  if (!(commit_margin_m >= 0.0) || !(commit_margin_m <= 5.0)) return bad("commit_margin_m must be in [0, 5]");
+  if (!(depth_timeout_s >= 0.0) || !std::isfinite(depth_timeout_s)) return bad("depth_timeout_s must be >= 0 (0: not required)");
+  if (!(odom_timeout_s > 0.0) || !std::isfinite(odom_timeout_s)) return bad("odom_timeout_s must be positive");
+  if (!(odom_max_age_s > 0.0) || !std::isfinite(odom_max_age_s)) return bad("odom_max_age_s must be positive");
+  if (!(max_tracking_error_m > 0.0)) return bad("max_tracking_error_m must be positive");
+  if (!(time_jump_threshold_s > 0.0) || !std::isfinite(time_jump_threshold_s))
+    return bad("time_jump_threshold_s must be positive");
+  if (!(waypoint_reached_radius_m >= 0.0) || !std::isfinite(waypoint_reached_radius_m))
+    return bad("waypoint_reached_radius_m must be >= 0");
   return true;
 }
 
@@ -107,14 +172,135 @@ PolynomialTrajectory ReplanFsm::reference() const {
   return reference_;
 }
 
-bool ReplanFsm::setOdometry(double t, const Eigen::Vector3d& position, const Eigen::Vector3d& velocity) {
-  if (!std::isfinite(t) || !position.allFinite() || !velocity.allFinite()) return false;
+bool ReplanFsm::setOdometry(double t, const Eigen::Vector3d& position, const Eigen::Vector3d& velocity,
+                            double arrival_s, std::string* why) {
+  if (std::isnan(arrival_s)) arrival_s = t;
+  if (!std::isfinite(t) || !std::isfinite(arrival_s) || !position.allFinite() || !velocity.allFinite()) {
+    if (why) *why = "NaN/inf values";
+    return false;
+  }
   std::lock_guard<std::mutex> lock(mutex_);
+  FsmOutput ignored;
+  observeClockLocked(arrival_s, &ignored);  // a time jump shifts odom_time_s_ before the order check
+  if (have_odom_ && t < odom_time_s_) {
+    if (why) *why = "stamped " + std::to_string(odom_time_s_ - t) + " s before the last odometry";
+    return false;
+  }
   have_odom_ = true;
   odom_time_s_ = t;
+  odom_arrival_s_ = arrival_s;
   odom_position_ = position;
   odom_velocity_ = velocity;
+  // Intermediate goals the vehicle came close to are done (the last one ends the mission in tick()).
+  while (next_goal_ + 1 < goals_.size() && (position - goals_[next_goal_]).norm() <= config_.waypoint_reached_radius_m)
+    ++next_goal_;
   return true;
+}
+
+void ReplanFsm::setDepthFused(double stamp_s, double arrival_s) {
+  if (std::isnan(arrival_s)) arrival_s = stamp_s;
+  if (!std::isfinite(stamp_s) || !std::isfinite(arrival_s)) return;
+  std::lock_guard<std::mutex> lock(mutex_);
+  FsmOutput ignored;
+  observeClockLocked(arrival_s, &ignored);
+  if (have_depth_ && stamp_s < depth_stamp_s_) return;
+  have_depth_ = true;
+  depth_stamp_s_ = stamp_s;
+  depth_arrival_s_ = arrival_s;
+}
+
+bool ReplanFsm::inputsFreshLocked(double now, std::string* why) const {
+  char text[128];
+  if (!have_odom_) {
+    *why = "no odometry";
+    return false;
+  }
+  if (now - odom_arrival_s_ > config_.odom_timeout_s) {
+    std::snprintf(text, sizeof(text), "no odometry for %.2f s", now - odom_arrival_s_);
+    *why = text;
+    return false;
+  }
+  if (std::abs(now - odom_time_s_) > config_.odom_max_age_s) {
+    std::snprintf(text, sizeof(text), "odometry stamped %.2f s %s", std::abs(now - odom_time_s_),
+                  now > odom_time_s_ ? "ago" : "in the future");
+    *why = text;
+    return false;
+  }
+  if (config_.depth_timeout_s > 0.0) {
+    if (!have_depth_) {
+      *why = "no depth frame fused yet";
+      return false;
+    }
+    if (std::abs(now - depth_stamp_s_) > config_.depth_timeout_s) {
+      std::snprintf(text, sizeof(text), "last depth frame fused is %.2f s old", now - depth_stamp_s_);
+      *why = text;
+      return false;
+    }
+  }
+  why->clear();
+  return true;
+}
+
+InputHealth ReplanFsm::inputHealth(double t) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  InputHealth h;
+  h.ok = inputsFreshLocked(t, &h.why);
+  h.depth_age_s = have_depth_ ? t - depth_stamp_s_ : -1.0;
+  h.odom_age_s = have_odom_ ? t - odom_time_s_ : -1.0;
+  return h;
+}
+
+void ReplanFsm::observeClockLocked(double now, FsmOutput* out) {
+  if (!std::isfinite(now)) return;
+  if (!have_clock_) {
+    have_clock_ = true;
+    last_clock_s_ = now;
+    return;
+  }
+  const double step = now - last_clock_s_;
+  // Calls from several threads read the clock before taking the lock, so small steps back are
+  // ordering, not time jumps.
+  if (std::abs(step) <= config_.time_jump_threshold_s) {
+    if (step > 0.0) typical_step_s_ = 0.9 * typical_step_s_ + 0.1 * step;
+    last_clock_s_ = std::max(last_clock_s_, now);
+    return;
+  }
+  // The clock also went on by about one usual interval between the two calls.
+  const double shift = step - typical_step_s_;
+  // A time jump: everything stamped on the old clock moves with it, so the commanded motion goes
+  // on where it was (the trajectory server shifts its copy the same way) and inputs are not
+  // taken for stale (or fresh) by the step alone.
+  if (current_) {
+    current_->start_time_s += shift;
+    current_->brake_start_s += shift;
+  }
+  odom_time_s_ += shift;
+  odom_arrival_s_ += shift;
+  depth_stamp_s_ += shift;
+  depth_arrival_s_ += shift;
+  last_clock_s_ = now;
+  ++time_jumps_;
+  time_jumped_ = true;
+  if (!out->message.empty()) out->message += "; ";
+  char text[128];
+  std::snprintf(text, sizeof(text), "time jump of %+.3f s: timing shifted by %+.3f s, replanning from the current state",
+                step, shift);
+  out->message += text;
+}
+
+int ReplanFsm::timeJumps() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return time_jumps_;
+}
+
+std::vector<Eigen::Vector3d> ReplanFsm::remainingGoalsLocked() const {
+  if (next_goal_ >= goals_.size()) return goals_.empty() ? goals_ : std::vector<Eigen::Vector3d>{goals_.back()};
+  return std::vector<Eigen::Vector3d>(goals_.begin() + long(next_goal_), goals_.end());
+}
+
+std::vector<Eigen::Vector3d> ReplanFsm::remainingGoals() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return remainingGoalsLocked();
 }
 
 GoalStatus ReplanFsm::setGoals(const std::vector<Eigen::Vector3d>& goals) {
@@ -123,6 +309,8 @@ GoalStatus ReplanFsm::setGoals(const std::vector<Eigen::Vector3d>& goals) {
   for (const Eigen::Vector3d& g : goals)
     if (!g.allFinite()) return last_goal_status_ = GoalStatus::kInvalidInput;
   if (!have_odom_) return last_goal_status_ = GoalStatus::kNoOdometry;
+  std::string why;
+  if (!have_clock_ || !inputsFreshLocked(last_clock_s_, &why)) return last_goal_status_ = GoalStatus::kInputsStale;
   pending_goals_ = goals;
   goals_pending_ = true;
   return GoalStatus::kAccepted;
@@ -187,18 +375,31 @@ double ReplanFsm::firstCollisionTime(const ExecTrajectory& traj, double t, const
   return -1.0;
 }
 
-ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::string* report) const {
-  FlatState s0 = takeoverStateLocked(t);
-  if (!current_) s0.velocity = odom_velocity_;
+ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::string* report,
+                                           const FlatState* from) const {
+  FlatState s0 = from ? *from : takeoverStateLocked(t);
+  if (!current_ && !from) s0.velocity = odom_velocity_;
   const double speed = s0.velocity.norm();
   if (speed < 0.05) s0.velocity.setZero();
-  // Constant deceleration a along the velocity: p(tau) = p0 + u (v tau - a tau^2 / 2).
+  // Along the current trajectory's path, which was checked when it was published: a stop on a curve
+  // stays on the curve instead of leaving it along the tangent. Without one (or from another state),
+  // along the velocity.
+  const bool along_path = !from && current_ && t - current_->start_time_s < current_->spline.duration();
+  std::optional<PathByLength> path;
+  if (along_path) {
+    path.emplace(current_->spline, t - current_->start_time_s, 0.01);
+    if (speed >= 0.05) path->setDirection(s0.velocity);
+  }
   auto brakeAt = [&](double a) {
     std::vector<Eigen::Vector3d> points;
     double interval = 0.1;
     Eigen::Vector3d start_acc = Eigen::Vector3d::Zero();
     if (speed < 0.05) {
       points.assign(4, s0.position);
+    } else if (path) {
+      points = stopPoints(*path, 0.0, speed, a, &interval);
+      points.front() = s0.position;
+      start_acc = -a * s0.velocity / speed;
     } else {
       const Eigen::Vector3d u = s0.velocity / speed;
       const double T = speed / a;
@@ -218,6 +419,7 @@ ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::s
       // Only for a degenerate state; hold the position instead (a spline of equal points).
       brake.spline = UniformBspline::straightLine(s0.position, s0.position, 6, 3, 0.1);
     }
+    brake.brake_start_s = t;
     return brake;
   };
   // At the planner's limit when that stops in time; harder (up to the vehicle's) when it does not.
@@ -230,13 +432,111 @@ ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::s
     hit = firstCollisionTime(brake, t, map);
   }
   if (report) {
-    char decel[64];
-    std::snprintf(decel, sizeof(decel), "braking at %.2f m/s^2 ", speed < 0.05 ? 0.0 : a);
+    char decel[96];
+    std::snprintf(decel, sizeof(decel), "braking at %.2f m/s^2 %s", speed < 0.05 ? 0.0 : a,
+                  path ? "along the path " : "");
     *report = std::string(decel) + (hit < 0.0 ? "checked: collision-free"
                                               : "checked: comes within the safety clearance " +
                                                     std::to_string(hit - t) + " s after braking starts");
   }
   return brake;
+}
+
+bool ReplanFsm::committable(const EsdfMap& map, const Eigen::Vector3d& p, const Eigen::Vector3d& start) const {
+  if ((p - start).norm() <= config_.known_start_radius_m) return true;
+  const DistanceQuery q = map.query(p);
+  return q.status == QueryStatus::kOk && q.distance >= config_.safety_clearance_m;
+}
+
+bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const EsdfMap& map, ExecTrajectory* traj,
+                                   std::string* why) const {
+  traj->spline = plan;
+  traj->brake_start_s = t0 + plan.duration();
+  traj->stops_before_unknown = false;
+  traj->has_heading_target = false;
+  if (!config_.commit_to_known_space) return true;
+  // The plan sampled by time, with arc length, up to its first point that may not be committed to.
+  const double T = plan.duration(), dt = config_.safety_sample_s;
+  const UniformBspline vel = plan.derivative();
+  const Eigen::Vector3d start = plan.evaluate(0.0);
+  std::vector<double> taus, arc, speed;
+  double blocked_s = -1.0;
+  Eigen::Vector3d prev = start;
+  for (double tau = 0.0;; tau = std::min(T, tau + dt)) {
+    const Eigen::Vector3d p = plan.evaluate(tau);
+    const double s = arc.empty() ? 0.0 : arc.back() + (p - prev).norm();
+    prev = p;
+    if (!committable(map, p, start)) {
+      blocked_s = s;
+      break;
+    }
+    taus.push_back(tau);
+    arc.push_back(s);
+    speed.push_back(tau >= T ? 0.0 : vel.evaluate(tau).norm());
+    if (tau >= T) break;
+  }
+  if (blocked_s < 0.0) return true;  // all of it is known free: flown as planned
+
+  // The last sample from which (and from every one before it) a stop along the path at the planning
+  // deceleration ends commit_margin_m before the blocked point.
+  const double a = config_.brake_acc_mps2;
+  size_t kb = 0;
+  while (kb + 1 < taus.size() &&
+         speed[kb + 1] * speed[kb + 1] / (2.0 * a) + config_.commit_margin_m <= blocked_s - arc[kb + 1])
+    ++kb;
+  double a_stop = a;
+  const double room = blocked_s - arc[kb] - config_.commit_margin_m;
+  if (speed[kb] * speed[kb] / (2.0 * a) > room) {
+    // Even now it cannot stop before unknown space at the planning limit (the map shrank or the
+    // start is already too close): stop as hard as the vehicle allows.
+    a_stop = std::min(config_.max_brake_acc_mps2, speed[kb] * speed[kb] / (2.0 * std::max(room, 1e-3)));
+  }
+  // Flown as planned to tau_b, then a stop along the same path, refitted as one spline.
+  const double tau_b = taus[kb], v_b = speed[kb];
+  const double T_stop = v_b > 1e-3 ? v_b / a_stop : 0.0, T_total = tau_b + T_stop;
+  const PathByLength path(plan, tau_b, 0.01);
+  const UniformBspline acc = vel.derivative();
+  const Eigen::Vector3d v0 = vel.evaluate(0.0), a0 = acc.evaluate(0.0);
+  if (T_total < 0.05 && v0.norm() < 0.05) {
+    // At rest at the edge of the known space: hold, and look where the plan goes.
+    traj->spline = UniformBspline::straightLine(start, start, 6, 3, 0.1);
+  } else {
+    const int n = std::max(6, int(std::ceil(T_total / 0.05)));
+    const double h = T_total / n;
+    std::vector<Eigen::Vector3d> points;
+    for (int k = 0; k <= n; ++k) {
+      const double tau = k * h;
+      if (tau <= tau_b) {
+        points.push_back(plan.evaluate(tau));
+      } else {
+        const double u = std::min(tau - tau_b, T_stop);
+        points.push_back(path.at(v_b * u - 0.5 * a_stop * u * u));
+      }
+    }
+    UniformBspline fitted;
+    if (!UniformBspline::fitToPoints(points, h, v0, a0, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), 3, &fitted)) {
+      *why = "known-space commitment: the cut trajectory could not be fitted";
+      return false;
+    }
+    traj->spline = fitted;
+  }
+  // The cut trajectory is checked as it will be flown.
+  const double D = traj->spline.duration();
+  for (double tau = 0.0;; tau = std::min(D, tau + dt)) {
+    if (!committable(map, traj->spline.evaluate(tau), start)) {
+      *why = "known-space commitment: the cut trajectory leaves the known free space " + std::to_string(tau) +
+             " s after its start";
+      return false;
+    }
+    if (tau >= D) break;
+  }
+  traj->brake_start_s = t0 + std::min(tau_b, D);
+  traj->stops_before_unknown = true;
+  // The camera should look past the stop, along the plan.
+  const PathByLength ahead(plan, 0.0, 0.02);
+  traj->heading_target = ahead.at(std::min(ahead.length(), blocked_s + 1.0));
+  traj->has_heading_target = true;
+  return true;
 }
 
 std::optional<ExecTrajectory> ReplanFsm::escapeTrajectoryLocked(double t, const EsdfMap& map,
@@ -286,11 +586,18 @@ std::optional<ExecTrajectory> ReplanFsm::escapeTrajectoryLocked(double t, const 
     return std::nullopt;
   }
   // Checked along the curve: never closer than it starts (nor than the safety clearance, when it
-  // starts farther), never out of the map.
+  // starts farther), never out of the map, in known space (beyond the vehicle's own radius).
   const double floor_m = std::min(d0, config_.safety_clearance_m) - 0.02;
   for (double tau = 0.0;; tau = std::min(escape.spline.duration(), tau + config_.safety_sample_s)) {
     double d = 0.0;
-    if (!map.interpolate(escape.spline.evaluate(tau), &d, nullptr) || d < floor_m) {
+    const Eigen::Vector3d p = escape.spline.evaluate(tau);
+    const bool known = !config_.commit_to_known_space || (p - p0).norm() <= config_.known_start_radius_m ||
+                       map.query(p).status == QueryStatus::kOk;
+    if (!known) {
+      *report = "no escape: the way out crosses unknown space";
+      return std::nullopt;
+    }
+    if (!map.interpolate(p, &d, nullptr) || d < floor_m) {
       *report = "no escape: the fitted escape comes closer to an obstacle than it starts";
       return std::nullopt;
     }
@@ -333,6 +640,7 @@ bool ReplanFsm::startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out) {
   if (status != TrajectoryStatus::kSuccess)
     return refuse(GoalStatus::kReferenceFailed, std::string("minimum-snap reference: ") + toString(status));
   goals_ = goals;
+  next_goal_ = 0;
   reference_ = std::move(ref);
   last_goal_status_ = GoalStatus::kAccepted;
   out->new_reference = true;
@@ -362,6 +670,15 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
   const double finished = now ? now() : t;
   lock->lock();
 
+  // The known-space commitment of a successful plan (on the map it was planned on).
+  ExecTrajectory traj;
+  if (result.status == ReplanStatus::kSuccess) {
+    std::string why;
+    if (!commitToKnownSpace(result.trajectory, t_take, map, &traj, &why)) {
+      result.status = ReplanStatus::kOptimizationFailed;
+      result.message += (result.message.empty() ? "" : "; ") + why;
+    }
+  }
   event.status = result.status;
   event.message = result.message;
   event.stats = result.stats;
@@ -373,13 +690,17 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
   else
     takeover_delay_s_ = std::max(config_.takeover_delay_s, std::max(0.9 * takeover_delay_s_, 1.5 * (finished - t)));
   if (result.status == ReplanStatus::kSuccess && !superseded && finished <= t_take) {
-    ExecTrajectory traj;
     traj.id = next_id_++;
     traj.start_time_s = t_take;
-    traj.spline = result.trajectory;
     traj.reference_start_s = result.local_start_time_s;
     traj.reference_end_s = result.local_goal_time_s;
-    traj.ends_at_goal = result.local_goal_time_s >= reference.duration() - 1e-6;
+    if (traj.stops_before_unknown) {
+      // It rejoins the reference only as far as it goes (proportionally, refined in referenceTimeAtLocked).
+      const double planned = result.trajectory.duration();
+      const double frac = planned > 0.0 ? std::clamp((traj.brake_start_s - t_take) / planned, 0.0, 1.0) : 0.0;
+      traj.reference_end_s = traj.reference_start_s + frac * (traj.reference_end_s - traj.reference_start_s);
+    }
+    traj.ends_at_goal = !traj.stops_before_unknown && result.local_goal_time_s >= reference.duration() - 1e-6;
     current_ = traj;
     collision_ahead_ = false;
     consecutive_failures_ = 0;
@@ -435,6 +756,27 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
   std::unique_lock<std::mutex> lock(mutex_);
   FsmOutput out;
   if (!std::isfinite(t)) return out;
+  observeClockLocked(t, &out);
+  // Nothing is planned on stale inputs (checkSafety() brakes a moving vehicle); goals wait.
+  std::string stale;
+  if (state_ != FsmState::kInit && !inputsFreshLocked(t, &stale)) {
+    if (goals_pending_ && state_ == FsmState::kWaitTarget) {
+      goals_pending_ = false;
+      last_goal_status_ = GoalStatus::kInputsStale;
+    }
+    if (!inputs_reported_) {
+      inputs_reported_ = true;
+      if (!out.message.empty()) out.message += "; ";
+      out.message += "inputs stale (" + stale + "): not planning";
+    }
+    return out;
+  }
+  const bool jumped = std::exchange(time_jumped_, false);
+  if (inputs_reported_ && state_ != FsmState::kInit) {
+    inputs_reported_ = false;
+    if (!out.message.empty()) out.message += "; ";
+    out.message += "inputs fresh again";
+  }
   switch (state_) {
     case FsmState::kInit:
       if (have_odom_) setState(FsmState::kWaitTarget, &out, "odometry received");
@@ -446,7 +788,7 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
     case FsmState::kGenNewTraj: {
       // A retry rebuilds the reference from where the vehicle will be, so it starts from its state.
       const bool fresh = goals_pending_;
-      if (!fresh) pending_goals_ = goals_;
+      if (!fresh) pending_goals_ = remainingGoalsLocked();
       goals_pending_ = true;
       if (startGoalsLocked(t, map, &out))
         plan(t, map, fresh ? FsmEvent::Trigger::kNewGoal : FsmEvent::Trigger::kRetry, &lock, &out, now);
@@ -472,11 +814,18 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
         }
         break;
       }
-      if (collision_ahead_) {
+      if (jumped) {
+        plan(t, map, FsmEvent::Trigger::kTimeJump, &lock, &out, now);
+      } else if (collision_ahead_) {
         plan(t, map, consecutive_failures_ > 0 ? FsmEvent::Trigger::kRetry : FsmEvent::Trigger::kCollisionAhead,
              &lock, &out, now);
-      } else if (!current_->ends_at_goal && (t - current_->start_time_s >= config_.replan_interval_s || ended ||
-                                             current_->endTime() - t <= stopTimeLocked(t) + 0.5 * config_.replan_interval_s)) {
+      } else if (!current_->ends_at_goal &&
+                 (t - current_->start_time_s >= config_.replan_interval_s || ended ||
+                  current_->endTime() - t <= stopTimeLocked(t) + 0.5 * config_.replan_interval_s ||
+                  (current_->stops_before_unknown &&
+                   current_->brake_start_s - t <= takeover_delay_s_ + 0.5 * config_.replan_interval_s))) {
+        // A trajectory cut before unknown space is replanned before its stop begins, so a plan on the
+        // grown map takes over while the vehicle still cruises.
         // Periodically, and early enough before a trajectory that ends moving runs out that a
         // failed plan still leaves retries before checkSafety() must brake for it.
         plan(t, map, consecutive_failures_ > 0 ? FsmEvent::Trigger::kRetry : FsmEvent::Trigger::kPeriodic, &lock,
@@ -489,8 +838,8 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
       if (!stopped) break;
       // Stopped: a new reference from here through the mission's goals (or the newer ones).
       if (!goals_pending_) {
-        pending_goals_ = goals_;
-        goals_pending_ = !goals_.empty();
+        pending_goals_ = remainingGoalsLocked();
+        goals_pending_ = !pending_goals_.empty();
       }
       if (!goals_pending_) {
         setState(FsmState::kWaitTarget, &out, "stopped, no mission");
@@ -505,15 +854,61 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
   return out;
 }
 
+void ReplanFsm::emergencyStopLocked(double t, const EsdfMap& map, const std::string& reason, FsmOutput* out,
+                                    const FlatState* from, ReplanStatus status) {
+  FsmEvent event;
+  event.trigger = FsmEvent::Trigger::kEmergency;
+  event.state = state_;
+  event.status = status;
+  event.fallback = "stop";
+  std::string report;
+  ExecTrajectory brake = brakingTrajectory(t, map, &report, from);
+  brake.id = next_id_++;
+  event.position = brake.spline.evaluate(0.0);
+  event.message = reason + "; " + report;
+  event.published = true;
+  current_ = brake;
+  collision_ahead_ = false;
+  setState(FsmState::kEmergencyStop, out, event.message);
+  out->trajectory = brake;
+  out->event = event;
+}
+
 FsmOutput ReplanFsm::checkSafety(double t, const EsdfMap& map) {
   std::lock_guard<std::mutex> lock(mutex_);
   FsmOutput out;
+  if (!std::isfinite(t)) return out;
+  observeClockLocked(t, &out);
+  if (!current_ || state_ == FsmState::kInit) return out;
+  const bool active = t < current_->endTime();
+  const double commanded_speed = active ? takeoverStateLocked(t).velocity.norm() : 0.0;
+  // Stale inputs: a moving vehicle brakes to a hover (a braking trajectory already does).
+  std::string stale;
+  if (!inputsFreshLocked(t, &stale)) {
+    if (!current_->braking && commanded_speed > config_.stopped_speed_mps)
+      emergencyStopLocked(t, map, "inputs stale (" + stale + ")", &out, nullptr, ReplanStatus::kInvalidInput);
+    return out;
+  }
+  // Odometry far from where the vehicle was commanded to be at its stamp (a VIO jump): hold at the
+  // measured position, moving on with the commanded velocity to a stop; replanned from there.
+  const double tracking_error = odom_time_s_ >= current_->start_time_s
+                                    ? (odom_position_ - takeoverStateLocked(odom_time_s_).position).norm()
+                                    : 0.0;
+  if (tracking_error > config_.max_tracking_error_m) {
+    FlatState from = takeoverStateLocked(t);
+    from.position = odom_position_ + from.velocity * std::max(0.0, t - odom_time_s_);
+    from.acceleration.setZero();
+    char text[160];
+    std::snprintf(text, sizeof(text), "odometry %.2f m from the commanded position (limit %.2f m): holding at the "
+                  "measured position", tracking_error, config_.max_tracking_error_m);
+    emergencyStopLocked(t, map, text, &out, &from, ReplanStatus::kInvalidInput);
+    return out;
+  }
   // Braking and escapes were checked when made and are not replanned (they end at rest).
-  if (!current_ || current_->manoeuvre() || !std::isfinite(t) || state_ == FsmState::kInit) return out;
+  if (current_->manoeuvre()) return out;
   if (t > current_->endTime() && state_ == FsmState::kWaitTarget) return out;
   // Time to stop from the current speed, plus the margin: a collision (or the end of a trajectory
   // that ends moving, past which nothing is planned) closer than that cannot wait for a replan.
-  const FlatState s = takeoverStateLocked(t);
   const double stop_time = stopTimeLocked(t);
   const double hit = firstCollisionTime(*current_, t, map);
   const double end_speed =
@@ -523,25 +918,11 @@ FsmOutput ReplanFsm::checkSafety(double t, const EsdfMap& map) {
   if (hit >= 0.0) collision_ahead_ = true;
   if (!runs_out && (hit < 0.0 || hit - t > stop_time)) return out;
 
-  FsmEvent event;
-  event.trigger = FsmEvent::Trigger::kEmergency;
-  event.state = state_;
-  event.position = s.position;
-  event.status = ReplanStatus::kOptimizationFailed;
-  event.fallback = "stop";
-  std::string report;
-  ExecTrajectory brake = brakingTrajectory(t, map, &report);
-  brake.id = next_id_++;
-  event.message = (hit >= 0.0 ? "collision in " + std::to_string(hit - t) + " s; "
-                                : "the trajectory ends moving in " + std::to_string(current_->endTime() - t) +
-                                      " s with no replan; ") +
-                  report;
-  event.published = true;
-  current_ = brake;
-  collision_ahead_ = false;
-  setState(FsmState::kEmergencyStop, &out, event.message);
-  out.trajectory = brake;
-  out.event = event;
+  emergencyStopLocked(t, map,
+                      hit >= 0.0 ? "collision in " + std::to_string(hit - t) + " s"
+                                 : "the trajectory ends moving in " + std::to_string(current_->endTime() - t) +
+                                       " s with no replan",
+                      &out, nullptr, ReplanStatus::kOptimizationFailed);
   return out;
 }
 

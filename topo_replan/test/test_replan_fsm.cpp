@@ -5,6 +5,8 @@
 
 #include <atomic>
 #include <cstdio>
+#include <functional>
+#include <map>
 #include <memory>
 #include <thread>
 
@@ -24,6 +26,7 @@ ReplanFsm::Config testConfig() {
   c.reference.max_segment_length_m = 3.0;
   c.reference.cruise_timing = true;
   c.replanner.local_goal_margin_m = 2.0;  // the planner node's
+  c.depth_timeout_s = 0.0;  // these maps are given, not fused (the liveness tests turn it on)
   return c;
 }
 
@@ -39,13 +42,22 @@ struct Corridor {
   SyntheticScene scene{Eigen::Vector3d(24.0, 8.0, 3.0)};
 };
 
-// The vehicle follows the FSM's current trajectory exactly; the odometry is its state.
+// The vehicle follows the FSM's trajectories exactly, each from its start time on, as the trajectory
+// server does; the odometry is its state.
 struct PerfectVehicle {
   Eigen::Vector3d position;
   Eigen::Vector3d velocity = Eigen::Vector3d::Zero();
+  std::vector<ExecTrajectory> received;
   void follow(const ReplanFsm& fsm, double t) {
-    const auto traj = fsm.current();
-    if (!traj) return;
+    const auto latest = fsm.current();
+    if (!latest) return;
+    if (!received.empty() && received.back().id == latest->id)
+      received.back() = *latest;  // the FSM may have shifted it (time jump)
+    else
+      received.push_back(*latest);
+    const ExecTrajectory* traj = &received.front();
+    for (const ExecTrajectory& r : received)
+      if (r.start_time_s <= t + 1e-9) traj = &r;
     const double tau = std::clamp(t - traj->start_time_s, 0.0, traj->spline.duration());
     position = traj->spline.evaluate(tau);
     velocity = t - traj->start_time_s >= traj->spline.duration() ? Eigen::Vector3d::Zero()
@@ -53,9 +65,22 @@ struct PerfectVehicle {
   }
 };
 
+// Faults injected into a flight: gaps in the inputs, a step of the FSM's clock, a jump of the odometry.
+struct Faults {
+  double depth_from = INFINITY, depth_to = INFINITY;  // no depth frame fused in [from, to)
+  double odom_from = INFINITY, odom_to = INFINITY;    // no odometry in [from, to)
+  double clock_step_at = INFINITY;                    // from then on the FSM's clock is off by clock_step_s
+  double clock_step_s = 0.0;
+  double odom_jump_at = INFINITY;                     // odometry off by odom_jump until the FSM re-anchors
+  Eigen::Vector3d odom_jump = Eigen::Vector3d::Zero();
+};
+
 struct FlightLog {
   std::vector<FsmEvent> events;
   std::vector<ExecTrajectory> trajectories;
+  std::vector<const EsdfMap*> trajectory_maps;  // the map each trajectory was published on
+  double max_position_step = 0.0;  // largest step of the commanded position between ticks beyond |v| dt [m]
+  double duration_s = 0.0;         // until the goal was reached (or the last tick) [s]
   std::vector<Eigen::Vector3d> flown;
   bool goal_reached = false;
   double min_clearance = INFINITY;
@@ -65,18 +90,34 @@ struct FlightLog {
 // Flies from `start` at 20 Hz for at most `ticks` ticks; `mapAt(t)` gives the map of the moment.
 template <typename MapAt>
 FlightLog fly(ReplanFsm* fsm, const Eigen::Vector3d& start, const std::vector<Eigen::Vector3d>& goals, MapAt mapAt,
-              int ticks, const EsdfMap& truth) {
+              int ticks, const EsdfMap& truth, const Faults& faults = Faults()) {
   FlightLog log;
   PerfectVehicle vehicle{start};
   const double dt = 0.05;
   EXPECT_TRUE(fsm->setOdometry(0.0, vehicle.position, vehicle.velocity));
+  fsm->setDepthFused(0.0);
   EXPECT_EQ(fsm->setGoals(goals), GoalStatus::kAccepted);
+  Eigen::Vector3d odom_offset = Eigen::Vector3d::Zero();
+  bool jumped = false;
   for (int k = 0; k < ticks && !log.goal_reached; ++k) {
-    const double t = k * dt;
+    const double t_true = k * dt;
+    const double t = t_true + (t_true >= faults.clock_step_at ? faults.clock_step_s : 0.0);  // the FSM's clock
+    const Eigen::Vector3d before = vehicle.position;
+    if (t_true >= faults.clock_step_at && t_true < faults.clock_step_at + 0.5 * dt)
+      fsm->checkSafety(t, mapAt(t, vehicle.position));  // the trajectory server sees the step on its own
     vehicle.follow(*fsm, t);
-    fsm->setOdometry(t, vehicle.position, vehicle.velocity);
+    if (k > 0) {
+      const double step = (vehicle.position - before).norm() - vehicle.velocity.norm() * dt;
+      if (getenv("FSM_DEBUG") && step > 0.01) printf("position step %.3f m at t=%.2f\n", step, t);
+      log.max_position_step = std::max(log.max_position_step, step);
+    }
+    if (t_true >= faults.odom_jump_at && !jumped) odom_offset = faults.odom_jump, jumped = true;
+    if (!(t_true >= faults.odom_from && t_true < faults.odom_to))
+      fsm->setOdometry(t, vehicle.position + odom_offset, vehicle.velocity);
+    if (!(t_true >= faults.depth_from && t_true < faults.depth_to)) fsm->setDepthFused(t);
     log.flown.push_back(vehicle.position);
     log.min_clearance = std::min(log.min_clearance, truth.query(vehicle.position).distance);
+    log.duration_s = t_true;
     const EsdfMap& map = mapAt(t, vehicle.position);
     for (FsmOutput out : {fsm->checkSafety(t, map), fsm->tick(t, map)}) {
       if (out.event) log.events.push_back(*out.event);
@@ -93,7 +134,10 @@ FlightLog fly(ReplanFsm* fsm, const Eigen::Vector3d& start, const std::vector<Ei
                out.trajectory->reference_start_s, out.trajectory->reference_end_s, out.trajectory->spline.maxVelocity());
       if (out.trajectory) {
         log.trajectories.push_back(*out.trajectory);
+        log.trajectory_maps.push_back(&map);
         log.braked = log.braked || out.trajectory->braking;
+        // Re-anchored at the measured position: the vehicle's estimate now follows the new trajectory.
+        if (jumped && out.trajectory->braking) odom_offset.setZero();
       }
       log.goal_reached = log.goal_reached || out.goal_reached;
     }
@@ -370,6 +414,262 @@ TEST(ReplanFsm, TickSafetyAndOdometryFromThreeThreads) {
   safety.join();
   EXPECT_TRUE(reached);
   EXPECT_GE(last_id, 2);
+}
+
+// A corridor seen by a forward camera of range_m: everything up to range_m ahead of the vehicle (in x)
+// is known, free or not; beyond it the map is unknown. Maps are cached per 0.5 m of reveal.
+class RevealedCorridor {
+ public:
+  RevealedCorridor(double range_m, std::function<void(SyntheticScene*)> obstacles)
+      : range_m_(range_m), obstacles_(std::move(obstacles)) {
+    truth_.reset(new Corridor);
+    obstacles_(&truth_->scene);
+    truth_->scene.finish();
+  }
+  const EsdfMap& truth() const { return *truth_->scene.esdf; }
+  const EsdfMap& at(const Eigen::Vector3d& p) {
+    const int key = int(std::floor((p.x() + range_m_) / 0.5));
+    auto& slot = cache_[key];
+    if (!slot) {
+      slot.reset(new Corridor);
+      obstacles_(&slot->scene);
+      const double reveal = 0.5 * key;
+      slot->scene.fill([&](const Eigen::Vector3d& q) { return q.x() > reveal; }, VoxelState::kUnknown);
+      slot->scene.finish();
+    }
+    return *slot->scene.esdf;
+  }
+
+ private:
+  double range_m_;
+  std::function<void(SyntheticScene*)> obstacles_;
+  std::unique_ptr<Corridor> truth_;
+  std::map<int, std::unique_ptr<Corridor>> cache_;
+};
+
+// Every published trajectory stays in the known free space of the map it was published on (beyond
+// the vehicle's own radius) and ends at rest there; with the commitment switched off, trajectories
+// run into unknown space. The flight still reaches its goal without braking.
+TEST(ReplanFsm, CommitsOnlyToKnownFreeSpace) {
+  auto obstacles = [](SyntheticScene* s) { s->pillar(12.0, 4.0, 0.6); };
+  RevealedCorridor corridor(4.5, obstacles);
+  auto mapAt = [&](double, const Eigen::Vector3d& p) -> const EsdfMap& { return corridor.at(p); };
+  ReplanFsm::Config config = testConfig();
+  auto fsm = makeFsm(config);
+  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, mapAt, 1200, corridor.truth());
+  EXPECT_TRUE(log.goal_reached);
+  EXPECT_FALSE(log.braked);
+  EXPECT_GT(log.min_clearance, 0.2);
+  expectContinuous(log.trajectories);
+  int cut = 0;
+  for (size_t i = 0; i < log.trajectories.size(); ++i) {
+    const ExecTrajectory& traj = log.trajectories[i];
+    const EsdfMap& map = *log.trajectory_maps[i];
+    const Eigen::Vector3d start = traj.spline.evaluate(0.0);
+    const double D = traj.spline.duration();
+    for (double tau = 0.0; tau <= D; tau += 0.02) {
+      const Eigen::Vector3d p = traj.spline.evaluate(tau);
+      if ((p - start).norm() <= config.known_start_radius_m) continue;
+      const DistanceQuery q = map.query(p);
+      ASSERT_EQ(q.status, QueryStatus::kOk) << "trajectory " << traj.id << " at " << tau << " s: " << p.transpose();
+      ASSERT_GE(q.distance, config.safety_clearance_m) << "trajectory " << traj.id;
+    }
+    EXPECT_LT(traj.spline.derivative().evaluate(D).norm(), 1e-6) << "trajectory " << traj.id << " ends moving";
+    cut += traj.stops_before_unknown;
+  }
+  EXPECT_GT(cut, 0);  // the camera's range mattered
+  const double mean_speed = 21.0 / log.duration_s;
+  printf("known-space commitment: %zu trajectories, %d cut before unknown space, %.1f s, mean speed %.2f m/s\n",
+         log.trajectories.size(), cut, log.duration_s, mean_speed);
+  EXPECT_GT(mean_speed, 1.0);  // the reference cruises at 2 m/s
+
+  config.commit_to_known_space = false;
+  auto optimistic = makeFsm(config);
+  const FlightLog opt_log = fly(optimistic.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, mapAt, 1200, corridor.truth());
+  int into_unknown = 0;
+  for (size_t i = 0; i < opt_log.trajectories.size(); ++i) {
+    const ExecTrajectory& traj = opt_log.trajectories[i];
+    const EsdfMap& map = *opt_log.trajectory_maps[i];
+    for (double tau = 0.0; tau <= traj.spline.duration(); tau += 0.02)
+      if (map.query(traj.spline.evaluate(tau)).status == QueryStatus::kUnknown) {
+        ++into_unknown;
+        break;
+      }
+  }
+  EXPECT_GT(into_unknown, 0);
+}
+
+// A plan cut before unknown space holds and looks at where it goes when the vehicle is at rest at
+// the edge of the known space; a plan entirely in known space is published as planned.
+TEST(ReplanFsm, AtRestAtTheEdgeOfKnownSpaceItHoldsAndLooksAhead) {
+  Corridor c;
+  c.scene.fill([](const Eigen::Vector3d& p) { return p.x() > 1.2; }, VoxelState::kUnknown);
+  const EsdfMap& map = c.scene.finish();
+  ReplanFsm::Config config = testConfig();
+  auto fsm = makeFsm(config);
+  ASSERT_TRUE(fsm->setOdometry(0.0, {1, 4, 1.5}, Eigen::Vector3d::Zero()));
+  ASSERT_EQ(fsm->setGoals({{10, 4, 1.5}}), GoalStatus::kAccepted);
+  const FsmOutput out = fsm->tick(0.0, map);
+  ASSERT_TRUE(out.trajectory) << out.message;
+  const ExecTrajectory& traj = *out.trajectory;
+  EXPECT_TRUE(traj.stops_before_unknown);
+  ASSERT_TRUE(traj.has_heading_target);
+  EXPECT_GT(traj.heading_target.x(), 1.5);  // ahead, where the plan goes
+  // It does not leave the known space around the vehicle.
+  for (double tau = 0.0; tau <= traj.spline.duration(); tau += 0.02)
+    EXPECT_LE(traj.spline.evaluate(tau).x(), 1.0 + config.known_start_radius_m + 1e-6);
+}
+
+// Depth stops for 3 s at cruise speed: the FSM brakes to a hover within the timeout, refuses new
+// goals while depth is stale, and finishes the mission once depth is back.
+TEST(ReplanFsm, BrakesToAHoverWhileDepthIsStaleAndResumes) {
+  Corridor c;
+  const EsdfMap& map = c.scene.finish();
+  ReplanFsm::Config config = testConfig();
+  config.depth_timeout_s = 0.5;
+  auto fsm = makeFsm(config);
+  Faults faults;
+  faults.depth_from = 3.0;
+  faults.depth_to = 6.0;
+  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
+                            1200, map, faults);
+  EXPECT_TRUE(log.goal_reached);
+  const ExecTrajectory* brake = nullptr;
+  const FsmEvent* stop = nullptr;
+  for (const ExecTrajectory& t : log.trajectories)
+    if (t.braking && !brake) brake = &t;
+  for (const FsmEvent& e : log.events)
+    if (e.trigger == FsmEvent::Trigger::kEmergency && !stop) stop = &e;
+  ASSERT_TRUE(brake);
+  ASSERT_TRUE(stop);
+  EXPECT_NE(stop->message.find("depth"), std::string::npos) << stop->message;
+  EXPECT_GE(brake->start_time_s, 3.0 + config.depth_timeout_s - 0.05);
+  EXPECT_LE(brake->start_time_s, 3.0 + config.depth_timeout_s + 0.1);  // within a check of the timeout
+  EXPECT_GT(brake->spline.derivative().evaluate(0.0).norm(), 1.0);    // it was cruising
+  EXPECT_LE(brake->spline.derivative().derivative().evaluate(0.0).norm(), config.brake_acc_mps2 + 1e-6);
+  // Nothing but the stop was published while depth was stale.
+  for (const ExecTrajectory& t : log.trajectories)
+    EXPECT_FALSE(t.start_time_s > brake->start_time_s + 1e-9 && t.start_time_s < 6.0) << "trajectory " << t.id;
+  expectContinuous(log.trajectories);
+  EXPECT_LT(log.max_position_step, 0.01);
+
+  // Goals are refused while depth is stale (or has never come).
+  auto fresh = makeFsm(config);
+  ASSERT_TRUE(fresh->setOdometry(0.0, {1, 4, 1.5}, Eigen::Vector3d::Zero()));
+  EXPECT_EQ(fresh->setGoals({{10, 4, 1.5}}), GoalStatus::kInputsStale);
+  fresh->setDepthFused(0.0);
+  EXPECT_EQ(fresh->setGoals({{10, 4, 1.5}}), GoalStatus::kAccepted);
+  ASSERT_TRUE(fresh->setOdometry(1.0, {1, 4, 1.5}, Eigen::Vector3d::Zero()));
+  EXPECT_EQ(fresh->setGoals({{10, 4, 1.5}}), GoalStatus::kInputsStale);  // depth 1 s old
+  EXPECT_FALSE(fresh->inputHealth(1.0).ok);
+  EXPECT_NE(fresh->inputHealth(1.0).why.find("depth"), std::string::npos);
+}
+
+// Odometry stops for 2 s at cruise speed: the safety check brakes (it does not just skip planning);
+// the mission goes on once odometry is back. Odometry stamped before the last one is refused.
+TEST(ReplanFsm, BrakesWhenOdometryStopsAndResumes) {
+  Corridor c;
+  const EsdfMap& map = c.scene.finish();
+  ReplanFsm::Config config = testConfig();
+  auto fsm = makeFsm(config);
+  Faults faults;
+  faults.odom_from = 3.0;
+  faults.odom_to = 5.0;
+  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
+                            1200, map, faults);
+  EXPECT_TRUE(log.goal_reached);
+  const ExecTrajectory* brake = nullptr;
+  for (const ExecTrajectory& t : log.trajectories)
+    if (t.braking && !brake) brake = &t;
+  ASSERT_TRUE(brake);
+  EXPECT_GE(brake->start_time_s, 3.0 + config.odom_timeout_s - 0.05);
+  EXPECT_LE(brake->start_time_s, 3.0 + config.odom_timeout_s + 0.1);
+  expectContinuous(log.trajectories);
+
+  std::string why;
+  EXPECT_TRUE(fsm->setOdometry(100.0, {1, 4, 1.5}, Eigen::Vector3d::Zero(), 100.0, &why));
+  EXPECT_FALSE(fsm->setOdometry(99.9, {1, 4, 1.5}, Eigen::Vector3d::Zero(), 100.01, &why));
+  EXPECT_NE(why.find("before the last"), std::string::npos) << why;
+}
+
+// A 1 m odometry jump (VIO relocalisation) at cruise speed: the FSM holds at the measured position,
+// stopping with the commanded velocity (no velocity step), then replans from there to the goal.
+TEST(ReplanFsm, HoldsAtTheMeasuredPositionAfterAnOdometryJump) {
+  Corridor c;
+  const EsdfMap& map = c.scene.finish();
+  ReplanFsm::Config config = testConfig();
+  auto fsm = makeFsm(config);
+  Faults faults;
+  faults.odom_jump_at = 3.0;
+  faults.odom_jump = Eigen::Vector3d(0.0, 1.0, 0.0);
+  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
+                            1200, map, faults);
+  EXPECT_TRUE(log.goal_reached);
+  size_t jump = 0;
+  while (jump < log.trajectories.size() && !log.trajectories[jump].braking) ++jump;
+  ASSERT_LT(jump, log.trajectories.size());
+  ASSERT_GT(jump, 0u);
+  const ExecTrajectory &before = log.trajectories[jump - 1], &brake = log.trajectories[jump];
+  EXPECT_LE(brake.start_time_s, 3.0 + 0.1);
+  const double tau = brake.start_time_s - before.start_time_s;
+  // Re-anchored by the jump, with the commanded velocity.
+  EXPECT_NEAR((brake.spline.evaluate(0.0) - before.spline.evaluate(tau)).y(), 1.0, 0.05);
+  EXPECT_LT((brake.spline.derivative().evaluate(0.0) - before.spline.derivative().evaluate(tau)).norm(), 1e-6);
+  // Later trajectories join without steps.
+  expectContinuous(std::vector<ExecTrajectory>(log.trajectories.begin() + long(jump), log.trajectories.end()));
+
+  // Without the check (an unreachable threshold) no hold happens.
+  config.max_tracking_error_m = 1e9;
+  auto blind = makeFsm(config);
+  const FlightLog blind_log = fly(blind.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
+                                  120, map, faults);
+  EXPECT_FALSE(blind_log.braked);
+}
+
+// The FSM's clock steps by +-5 s mid-flight: the commanded motion goes on without a jump, the FSM
+// replans from the current state and reaches the goal.
+TEST(ReplanFsm, TimeJumpsShiftTheTimingWithoutASetpointJump) {
+  Corridor c;
+  const EsdfMap& map = c.scene.finish();
+  for (const double step : {5.0, -5.0}) {
+    auto fsm = makeFsm();
+    Faults faults;
+    faults.clock_step_at = 3.0;
+    faults.clock_step_s = step;
+    const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
+                              1200, map, faults);
+    EXPECT_TRUE(log.goal_reached) << step;
+    EXPECT_EQ(fsm->timeJumps(), 1) << step;
+    bool replanned = false;
+    for (const FsmEvent& e : log.events) replanned = replanned || (e.trigger == FsmEvent::Trigger::kTimeJump && e.published);
+    EXPECT_TRUE(replanned) << step;
+    EXPECT_FALSE(log.braked) << step;
+    // The perfect vehicle follows the FSM's trajectory at the FSM's clock: no step beyond one tick of
+    // the estimated interval between calls.
+    EXPECT_LT(log.max_position_step, 0.05) << step;
+  }
+}
+
+// Goals already reached are not flown again when the mission's reference is rebuilt (after an
+// emergency stop here).
+TEST(ReplanFsm, RebuiltMissionsKeepOnlyTheGoalsNotReached) {
+  Corridor c;
+  const EsdfMap& map = c.scene.finish();
+  ReplanFsm::Config config = testConfig();
+  config.depth_timeout_s = 0.5;
+  auto fsm = makeFsm(config);
+  Faults faults;  // depth stops after the first waypoint: a stop, then a rebuilt reference
+  faults.depth_from = 5.0;
+  faults.depth_to = 6.0;
+  const Eigen::Vector3d first(6, 4, 1.5), last(16, 4, 1.5);
+  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {first, {11, 6, 1.5}, last},
+                            [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; }, 1200, map, faults);
+  EXPECT_TRUE(log.goal_reached);
+  ASSERT_TRUE(log.braked);
+  // The reference rebuilt after the stop does not go back to the first goal.
+  const PolynomialTrajectory ref = fsm->reference();
+  for (double t = 0.0; t <= ref.duration(); t += 0.05) EXPECT_GT((ref.position(t) - first).norm(), 1.0) << t;
+  EXPECT_LT((ref.position(ref.duration()) - last).norm(), 1e-6);
 }
 
 TEST(ReplanFsm, InvalidConfigIsRefused) {

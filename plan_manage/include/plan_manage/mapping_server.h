@@ -144,6 +144,11 @@ class MappingServer {
     uint64_t frames_refused = 0;   ///< refused by the conversions, the frame check or the core
     double last_fusion_ms = 0.0;   ///< duration of the last fusion [ms]
     double last_esdf_ms = 0.0;     ///< duration of the last ESDF update [ms]
+    /// Liveness of the inputs (ROS time seconds; -1 = never): the last depth frame or cloud that
+    /// reached the map (fused, or valid but empty, e.g. a camera facing open sky) and the last
+    /// accepted pose/odometry, by stamp and by arrival.
+    double depth_stamp_s = -1.0, depth_arrival_s = -1.0;
+    double pose_stamp_s = -1.0, pose_arrival_s = -1.0;
   };
 
   /// Builds the maps, loads config.map_file, subscribes and advertises in `nh` (the node's
@@ -176,7 +181,7 @@ class MappingServer {
   bool frameAccepted(const std::string& frame, const char* what) const;
 
   /// The writer: recenters the window if asked, runs `fuse` and updates the ESDF, under map_mutex_.
-  void integrate(const char* source, const Eigen::Vector3d& sensor_position,
+  void integrate(const char* source, const ros::Time& stamp, const Eigen::Vector3d& sensor_position,
                  const std::function<FusionResult(OccupancyMap&)>& fuse);
   VoxelBox recenterLocked(const Eigen::Vector3d& sensor_position);
 
@@ -195,6 +200,7 @@ class MappingServer {
   mutable std::mutex pose_mutex_;
   bool have_pose_ = false;
   ros::Time latest_pose_stamp_;
+  double latest_pose_arrival_s_ = -1.0;
   Eigen::Vector3d latest_camera_position_ = Eigen::Vector3d::Zero();
 
   message_filters::Subscriber<sensor_msgs::Image> depth_sub_;

@@ -11,13 +11,21 @@
 //             emergency stop
 //   main      odometry and goals
 //
+// Inputs are watched by the FSM (topo_replan/replan_fsm.h, "Input liveness"): odometry (stamp and
+// arrival; odometry in another frame than frame_id, or stamped before the last one, is ignored with a
+// throttled warning) and the mapping's last fused depth frame, passed to the FSM before every tick
+// and safety check. Stale inputs refuse goals, stop planning and brake a moving vehicle to a hover.
+//
 // Topics (private; remap them in the launch file)
 //   Subscribed  ~odometry        nav_msgs/Odometry (body pose; twist in the child frame unless
 //                                odom_twist_in_world)
 //               ~goal            geometry_msgs/PoseStamped (rviz 2D Nav Goal; placed at goal_height_m)
 //               ~waypoints       nav_msgs/Path (3-D goals, flown in order)
 //               ~mapping/...     the mapping topics (plan_manage/mapping_server.h)
-//   Published   ~bspline         topo_planner/Bspline, every trajectory the FSM returns
+//   Published   ~bspline         topo_planner/Bspline, every trajectory the FSM returns (with this
+//                                process's random planner_session, so a restarted planner is accepted)
+//               ~heartbeat       topo_planner/PlannerHeartbeat at every safety check: session, state,
+//                                input freshness (the trajectory server stops the vehicle without it)
 //               ~replan_event    topo_planner/ReplanEvent, every planning call
 //               ~reference_path  nav_msgs/Path (latched), the global reference
 //               ~vis/trajectory, ~vis/candidates, ~vis/guide_paths   visualization_msgs/MarkerArray
@@ -50,7 +58,6 @@ class PlannerServer {
     double goal_height_m = 1.0;         ///< height of rviz 2D Nav Goals [m]
     double plan_period_s = 0.05;        ///< FSM tick period [s]
     double safety_period_s = 0.05;      ///< safety check period [s]
-    double odom_timeout_s = 0.5;        ///< older odometry stops planning (throttled warning) [s]
     std::vector<Eigen::Vector3d> goals; ///< a mission flown once odometry arrives (param goals_m)
     double vis_sample_s = 0.05;         ///< time step of the trajectory markers [s]
   };
@@ -71,7 +78,9 @@ class PlannerServer {
   void handle(const FsmOutput& out);
   void publishReference();
   void publishPlanMarkers(const ReplanResult& plan, const ExecTrajectory* chosen);
-  bool odometryFresh(double now) const;
+  /// Passes the mapping's last fused depth frame to the FSM.
+  void feedDepth();
+  void publishHeartbeat(double now);
 
   ros::NodeHandle nh_;
   Config config_;
@@ -81,11 +90,13 @@ class PlannerServer {
   std::unique_ptr<ros::AsyncSpinner> mapping_spinner_, planning_spinner_, safety_spinner_;
 
   ros::Subscriber odom_sub_, goal_sub_, waypoints_sub_;
+  uint64_t session_ = 0;  // random per process: trajectory ordering survives a restart
+  ros::Publisher heartbeat_pub_;
+  int time_jumps_logged_ = 0;  // safety thread only
   ros::Publisher bspline_pub_, event_pub_, reference_pub_, traj_vis_pub_, candidates_vis_pub_, guides_vis_pub_,
       roadmap_vis_pub_;
   ros::Timer plan_timer_, safety_timer_;
-  std::atomic<double> last_odom_time_{-1.0};
-  std::atomic<bool> initial_goals_sent_{false};
+  std::atomic<bool> initial_goals_sent_{false};  // goals_m accepted (retried every tick until then)
 };
 
 /// Reads the planner's parameters (and the mapping's, under ~mapping) with the struct defaults,

@@ -5,6 +5,8 @@
 #include <ros/time.h>
 #include <visualization_msgs/Marker.h>
 
+#include <cstdint>
+#include <optional>
 #include <string>
 
 #include "topo_planner/Bspline.h"
@@ -14,11 +16,22 @@
 
 namespace topo_planner {
 
-/// The message of a trajectory whose start_time_s is in ROS time seconds.
-Bspline toMsg(const ExecTrajectory& trajectory, const std::string& frame_id);
-/// The spline and start time of a message; false (with a reason) for an invalid one (too few or
-/// non-finite control points, bad degree or knot span).
-bool fromMsg(const Bspline& msg, UniformBspline* spline, double* start_time_s, std::string* why);
+/// The message of a trajectory whose start_time_s is in ROS time seconds, from the planner process
+/// `planner_session` (a number drawn when it starts: ordering across restarts), with its heading
+/// target when it has one.
+Bspline toMsg(const ExecTrajectory& trajectory, const std::string& frame_id, uint64_t planner_session);
+
+/// What the trajectory server takes from a Bspline message.
+struct ReceivedTrajectory {
+  uint64_t planner_session = 0;
+  int64_t id = -1;
+  double start_time_s = 0.0;  ///< [s, ROS time]
+  UniformBspline spline;
+  std::optional<Eigen::Vector3d> heading_target;  ///< set when has_heading_target [m, world]
+};
+/// The content of a message; false (with a reason) for an invalid one (too few or non-finite
+/// control points, bad degree or knot span, a non-finite heading target).
+bool fromMsg(const Bspline& msg, ReceivedTrajectory* out, std::string* why);
 
 PositionCommand toMsg(const Setpoint& setpoint, const ros::Time& stamp, const std::string& frame_id);
 

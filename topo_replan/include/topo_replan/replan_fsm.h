@@ -16,16 +16,41 @@
 //   REPLAN_TRAJ     planning from the state on the current trajectory at the time the new one takes
 //                   over (now + a takeover delay that adapts to the planning time); on failure the current one is kept while it is
 //                   safe and planning is retried every tick
-//   EMERGENCY_STOP  no safe trajectory and a collision closer than the braking distance: a braking
-//                   trajectory (constant deceleration along the velocity, at brake_acc_mps2, harder
-//                   up to max_brake_acc_mps2 when that would not stop in time) is executed; once
-//                   stopped, a new reference from the stopping point is generated. A vehicle at rest
-//                   where the replanner cannot start (closer than its clearance to an obstacle)
+//   EMERGENCY_STOP  no safe trajectory and a collision closer than the braking distance, a stale
+//                   input (depth, odometry), or odometry that jumped away from the commanded state:
+//                   a braking trajectory (constant deceleration along the current trajectory's path,
+//                   at brake_acc_mps2, harder up to max_brake_acc_mps2 when that would not stop in
+//                   time) is executed; once stopped and the inputs are fresh, a new reference from
+//                   the stopping point through the goals not yet reached is generated. A vehicle at
+//                   rest where the replanner cannot start (closer than its clearance to an obstacle)
 //                   first flies a short, slow escape up the distance field, also in this state.
 //
 // Every trajectory it returns has passed a collision and feasibility check on the map it was
 // planned on (the replanner's final check; the braking trajectory is checked too, and its result
 // reported, since braking is the last safe action left).
+//
+// Known-space commitment (commit_to_known_space, FASTER's safe/committed split done along the
+// path). The replanner plans optimistically: unknown space counts as free, so it explores. What the
+// FSM publishes is cut to what is known: the plan is flown as planned while, at every instant, a
+// stop along its path at brake_acc_mps2 would end before the first point of the path that is not
+// observed free (or comes within safety_clearance_m of an obstacle); from the last such instant
+// (brake_start_s) the published trajectory brakes along the same path to rest. So at every instant
+// of every published trajectory the vehicle can stop, at the planning deceleration, in space the
+// map has observed free; if no later plan comes, it does stop there. A new plan takes over before
+// the braking starts while the map keeps growing ahead (the FSM replans early enough), so normal
+// flight does not slow down; it slows where the camera has not seen far enough.
+//
+// Input liveness. Odometry is fresh when it arrived within odom_timeout_s and its stamp is within
+// odom_max_age_s of the clock; depth when the last fused frame's stamp is within depth_timeout_s.
+// Stale inputs: goals are refused (kInputsStale), nothing is planned, and a moving vehicle brakes to
+// a hover; the mission resumes when they are fresh again. Odometry stamped before the last one is
+// refused. Odometry farther than max_tracking_error_m from the commanded position at its stamp (a
+// VIO jump or relocalisation) makes the FSM hold at the measured position and replan from there.
+//
+// Time. A clock that steps backwards or forwards by more than time_jump_threshold_s between two
+// calls (setOdometry's arrival time, tick, checkSafety) is a time jump: every stored time (the
+// trajectory's start, the inputs' stamps) is shifted by the step so the commanded motion goes on
+// without a jump, and the FSM replans from the current state.
 //
 // Threads: two callers, both may run at the same time: tick() (the planning thread: state machine
 // and planning) and checkSafety() (the safety thread: collision check of the executing trajectory and
@@ -56,6 +81,7 @@ enum class GoalStatus {
   kGoalInObstacle,  ///< a goal is closer than goal_clearance_m to a known obstacle
   kGoalOutOfMap,    ///< a goal lies outside the map window
   kReferenceFailed, ///< no minimum-snap reference through the goals
+  kInputsStale,     ///< depth or odometry is stale or has never arrived (see InputHealth)
 };
 const char* toString(GoalStatus status);
 
@@ -69,6 +95,15 @@ struct ExecTrajectory {
   bool ends_at_goal = false;       ///< rejoins the reference at its end (the last goal, at rest)
   bool braking = false;            ///< an emergency braking trajectory
   bool escape = false;             ///< a slow manoeuvre out of an obstacle's clearance, from rest to rest
+  /// Known-space commitment: the planned (optimistic) trajectory is flown until this time, then the
+  /// vehicle stops along its path within the space the map has observed free. Equal to endTime()
+  /// when the whole plan lies in known-free space [s, caller's clock].
+  double brake_start_s = 0.0;
+  bool stops_before_unknown = false;  ///< the plan was cut: it ends at rest before unknown space
+  /// Where the camera should look when the trajectory's own displacement gives no heading (a stop
+  /// at the edge of the known space): a point ahead on the planned (optimistic) path.
+  bool has_heading_target = false;
+  Eigen::Vector3d heading_target = Eigen::Vector3d::Zero();
   double endTime() const { return start_time_s + spline.duration(); }
   /// Braking or escape: checked when made, ends at rest, not on the reference, not replanned.
   bool manoeuvre() const { return braking || escape; }
@@ -76,7 +111,7 @@ struct ExecTrajectory {
 
 /// What one call did, for logging and the ReplanEvent message.
 struct FsmEvent {
-  enum class Trigger { kNewGoal, kCollisionAhead, kPeriodic, kRetry, kEmergency };
+  enum class Trigger { kNewGoal, kCollisionAhead, kPeriodic, kRetry, kEmergency, kTimeJump };
   Trigger trigger = Trigger::kNewGoal;
   FsmState state = FsmState::kInit;     ///< state when it started
   bool published = false;               ///< a new trajectory was returned
@@ -87,6 +122,14 @@ struct FsmEvent {
   ReplanStats stats;
 };
 const char* toString(FsmEvent::Trigger trigger);
+
+/// Freshness of the inputs at a time, for the heartbeat, the diagnostics and the log.
+struct InputHealth {
+  bool ok = false;            ///< every input is fresh
+  std::string why;            ///< what is stale, when not ok
+  double depth_age_s = -1.0;  ///< clock - stamp of the last fused depth frame [s]; -1 = never
+  double odom_age_s = -1.0;   ///< clock - stamp of the last odometry [s]; -1 = never
+};
 
 struct FsmOutput {
   std::optional<ExecTrajectory> trajectory;       ///< publish this (already checked)
@@ -127,15 +170,38 @@ class ReplanFsm {
     double escape_speed_mps = 0.5;    ///< peak speed of the escape [m/s]
     double max_escape_length_m = 1.0; ///< no escape when the way out is longer than this [m]; 0: never
 
+    // Known-space commitment (see the class comment).
+    bool commit_to_known_space = true;  ///< false: publish plans through unknown space as planned (optimistic)
+    /// Path points this close to a trajectory's start count as known: the vehicle is there (or will be,
+    /// on a trajectory checked before), though the camera cannot see its own position [m].
+    double known_start_radius_m = 0.3;
+    double commit_margin_m = 0.1;       ///< the committed stop ends this far before unknown space [m]
+
+    // Input liveness (see the class comment).
+    double depth_timeout_s = 0.5;       ///< depth older than this is stale; 0: depth is not required [s]
+    double odom_timeout_s = 0.25;       ///< odometry that has not arrived for this long is stale [s]
+    double odom_max_age_s = 0.5;        ///< odometry stamped longer ago than this is stale [s]
+    double max_tracking_error_m = 0.6;  ///< odometry this far from the commanded position: hold and replan [m]
+    double time_jump_threshold_s = 1.0; ///< a clock step (either way) larger than this between calls is a time jump [s]
+    /// An intermediate goal counts as reached (and is left out of rebuilt references) once the vehicle
+    /// came this close to it [m].
+    double waypoint_reached_radius_m = 1.0;
+
     bool validate(std::string* why) const;
   };
 
   static std::unique_ptr<ReplanFsm> create(const Config& config, std::string* error);
   const Config& config() const { return config_; }
 
-  /// Latest vehicle state (position and world-frame velocity) at time t. Non-finite values are
-  /// refused (false) and the last valid odometry is kept.
-  bool setOdometry(double t, const Eigen::Vector3d& position, const Eigen::Vector3d& velocity);
+  /// Latest vehicle state (position and world-frame velocity) stamped t, received at arrival_s (the
+  /// caller's clock; NaN: at t). Non-finite values and stamps older than the last accepted one are
+  /// refused (false, with the reason in *why) and the last valid odometry is kept.
+  bool setOdometry(double t, const Eigen::Vector3d& position, const Eigen::Vector3d& velocity,
+                   double arrival_s = NAN, std::string* why = nullptr);
+  /// The mapping fused a depth frame (or cloud) stamped stamp_s, at arrival_s (NaN: at stamp_s).
+  void setDepthFused(double stamp_s, double arrival_s = NAN);
+  /// Freshness of the inputs at clock t.
+  InputHealth inputHealth(double t) const;
   /// A new mission (replaces the current one): the goals are checked against the map and the
   /// reference is built at the next tick(); the status of that check is returned by tick() in
   /// FsmOutput::message and kept in lastGoalStatus(). Immediate refusal for no odometry or bad input.
@@ -153,6 +219,9 @@ class ReplanFsm {
   GoalStatus lastGoalStatus() const;
   std::optional<ExecTrajectory> current() const;
   PolynomialTrajectory reference() const;
+  /// The goals of the mission not reached yet (what a rebuilt reference goes through).
+  std::vector<Eigen::Vector3d> remainingGoals() const;
+  int timeJumps() const;  ///< time jumps seen so far
 
  private:
   explicit ReplanFsm(const Config& config, std::unique_ptr<TopoReplanner> replanner);
@@ -168,7 +237,26 @@ class ReplanFsm {
   double stopTimeLocked(double t) const;
   /// First time >= t at which the trajectory comes closer than safety_clearance_m; -1 if none.
   double firstCollisionTime(const ExecTrajectory& traj, double t, const EsdfMap& map) const;
-  ExecTrajectory brakingTrajectory(double t, const EsdfMap& map, std::string* report) const;
+  /// Stops from the state at t: along the current trajectory's path (checked space) when there is one,
+  /// else along the velocity; at brake_acc_mps2, harder when that comes within the safety clearance.
+  /// With `from`, the stop starts from that state instead, along its velocity (odometry jump).
+  ExecTrajectory brakingTrajectory(double t, const EsdfMap& map, std::string* report,
+                                   const FlatState* from = nullptr) const;
+  /// A point of `map` the committed part of a trajectory may cross: observed free (all 8 voxels
+  /// around it), at least safety_clearance_m from obstacles; or within known_start_radius_m of start.
+  bool committable(const EsdfMap& map, const Eigen::Vector3d& p, const Eigen::Vector3d& start) const;
+  /// The known-space commitment of a plan starting at t0 (see the class comment): fills traj->spline,
+  /// brake_start_s, stops_before_unknown and the heading target; false (with why) when the cut
+  /// trajectory cannot be built or fails its check.
+  bool commitToKnownSpace(const UniformBspline& plan, double t0, const EsdfMap& map, ExecTrajectory* traj,
+                          std::string* why) const;
+  /// Clock bookkeeping of every entry point: detects a time jump and shifts the stored times.
+  void observeClockLocked(double now, FsmOutput* out);
+  bool inputsFreshLocked(double now, std::string* why) const;
+  /// Brakes now for `reason` (stale input, odometry jump): publishes the stop, EMERGENCY_STOP.
+  void emergencyStopLocked(double t, const EsdfMap& map, const std::string& reason, FsmOutput* out,
+                           const FlatState* from, ReplanStatus status);
+  std::vector<Eigen::Vector3d> remainingGoalsLocked() const;
   /// From the commanded position at rest, up the distance field to escape_clearance_m, checked to
   /// never come closer to an obstacle than it starts (or than the safety clearance); nullopt with
   /// the reason in `report` when there is no such way.
@@ -183,6 +271,17 @@ class ReplanFsm {
   FsmState state_ = FsmState::kInit;
   bool have_odom_ = false;
   double odom_time_s_ = 0.0;
+  double odom_arrival_s_ = 0.0;
+  bool have_depth_ = false;
+  double depth_stamp_s_ = 0.0;
+  double depth_arrival_s_ = 0.0;
+  bool have_clock_ = false;
+  double last_clock_s_ = 0.0;
+  double typical_step_s_ = 0.0;  // running mean of the clock's steps between calls [s]
+  int time_jumps_ = 0;
+  bool time_jumped_ = false;      // set by observeClockLocked, consumed by tick (replan)
+  bool inputs_reported_ = false;  // the stale-input message was given (once per episode)
+  size_t next_goal_ = 0;          // goals_[next_goal_..] are not reached yet
   Eigen::Vector3d odom_position_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d odom_velocity_ = Eigen::Vector3d::Zero();
   std::vector<Eigen::Vector3d> pending_goals_;  // set by setGoals, consumed by tick
