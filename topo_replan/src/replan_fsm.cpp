@@ -619,6 +619,7 @@ bool ReplanFsm::startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out) {
     out->message += std::string("goal refused: ") + toString(status) + ": " + why;
     return false;
   };
+  if (goals.empty()) return refuse(GoalStatus::kInvalidInput, "no goals");
   for (size_t i = 0; i < goals.size(); ++i) {
     const DistanceQuery q = map.query(goals[i]);
     if (q.status == QueryStatus::kOutOfMap || q.status == QueryStatus::kInvalidInput)
@@ -810,6 +811,8 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
       if (current_->ends_at_goal && ended) {
         if ((odom_position_ - goals_.back()).norm() <= config_.goal_tolerance_m) {
           out.goal_reached = true;
+          goals_.clear();  // done: a later stop (e.g. an odometry jump at the hover) flies nowhere
+          next_goal_ = 0;
           setState(FsmState::kWaitTarget, &out, "goal reached");
         }
         break;
