@@ -6,7 +6,7 @@ WS := $(ROOT)/build/ws
 CATKIN_ARGS := -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=Release
 BIN = $(1)/devel/lib/topo_planner
 
-.PHONY: deps build test bench bench-env bench-topo bench-opt bench-replan bench-forest-gen bench-camera bench-flight demo map-demo test-asan test-tsan clean
+.PHONY: deps build test bench bench-env bench-topo bench-opt bench-replan bench-forest-gen bench-camera bench-flight bench-faults demo map-demo test-asan test-tsan clean
 
 deps:
 	@bash scripts/install_deps.sh
@@ -75,6 +75,14 @@ map-demo: build
 bench-flight: build
 	@mkdir -p results
 	WS=$(WS) /usr/bin/python3 scripts/bench_flight.py --out $(ROOT)/results $(BENCH_ARGS)
+
+# Fault injection (scripts/bench_faults.py): 20 seeded closed-loop flights in simulated time, each with
+# a random schedule of faults (camera or odometry blackout, odometry jump, ROS time step, planner kill),
+# plus the same flights without faults as the control: results/bench_faults.md (a table per fault kind)
+# and a RESULT line. About half an hour (45 s a flight); not in CI.
+bench-faults: build
+	@mkdir -p results
+	WS=$(WS) /usr/bin/python3 scripts/bench_faults.py --out $(ROOT)/results $(BENCH_ARGS)
 
 # The tests under AddressSanitizer + UBSan, and under ThreadSanitizer, in their own workspaces.
 # Any sanitizer report stops the test that hit it, so it counts as a failure.

@@ -6,9 +6,13 @@
 #
 #   run_flight.sh [--density low|medium|high] [--map-style forest|walls|rings|mixed] [--seed N] [--goals "x y z x y z ..."] [--start "x y z"]
 #                 [--max-vel M/S] [--goal-timeout S] [--output-dir DIR] [--name NAME] [--rviz true|false]
-#                 [--sim-time true|false] [--timeout S] [--verbose] [--no-plot] [-- roslaunch args...]
+#                 [--sim-time true|false] [--realtime-factor F] [--master-port PORT] [--timeout S] [--verbose]
+#                 [--no-plot] [-- roslaunch args...]
 #
 # Files: DIR/NAME.csv, NAME_events.csv, NAME_map.csv, NAME_reference.csv, NAME_report.json, NAME.png.
+# Faults (simulation.launch's depth_blackouts:=, odom_blackouts:=, odom_jumps:=, clock_steps:=,
+# faults_start_on_speed:=, planner_respawn:=) go after --; --master-port fixes the private master's
+# port (scripts/bench_faults.py talks to the flight through it), --realtime-factor the sim-time pace.
 # rviz opens when $DISPLAY is set (unless --rviz false). The launch gets its own ROS master on a free
 # port, so flights never talk to another roscore on the machine. --timeout (default: goals x
 # goal timeout + 180 s) is a wall-clock guard against a hung simulation only; the monitor's per-goal
@@ -29,6 +33,8 @@ output_dir=$ROOT/results
 name=flight
 rviz=""
 sim_time=false
+realtime_factor=""
+port=""
 timeout_s=""
 verbose=false
 plot=true
@@ -47,11 +53,13 @@ while [ $# -gt 0 ]; do
     --name) name=$2; shift 2 ;;
     --rviz) rviz=$2; shift 2 ;;
     --sim-time) sim_time=$2; shift 2 ;;
+    --realtime-factor) realtime_factor=$2; shift 2 ;;
+    --master-port) port=$2; shift 2 ;;
     --timeout) timeout_s=$2; shift 2 ;;
     --verbose) verbose=true; shift ;;
     --no-plot) plot=false; shift ;;
     --) shift; extra=("$@"); break ;;
-    -h|--help) sed -n '2,17p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,21p' "$0"; exit 0 ;;
     *) echo "run_flight: unknown option $1 (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -95,6 +103,7 @@ args=(density:="$density" map_style:="$map_style" seed:="$seed" rviz:="$rviz" si
 [ -n "$goals" ] && args+=(goals:="$(yaml_list "$goals")")
 [ -n "$start" ] && args+=(start:="$(yaml_list "$start")")
 [ -n "$max_vel" ] && args+=(max_vel:="$max_vel")
+[ -n "$realtime_factor" ] && args+=(realtime_factor:="$realtime_factor")
 [ "$verbose" = true ] || args+=(output:=log)
 args+=("${extra[@]}")
 
@@ -104,7 +113,9 @@ for f in "$name.csv" "${name}_events.csv" "${name}_map.csv" "${name}_reference.c
 done
 
 # A private master on a free port.
-port=$(/usr/bin/python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
+if [ -z "$port" ]; then
+  port=$(/usr/bin/python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
+fi
 export ROS_MASTER_URI=http://127.0.0.1:$port
 export ROS_HOSTNAME=127.0.0.1
 unset ROS_IP

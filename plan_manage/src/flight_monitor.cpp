@@ -19,7 +19,6 @@ namespace {
 bool finitePositive(double x) { return std::isfinite(x) && x > 0.0; }
 bool finiteNonNegative(double x) { return std::isfinite(x) && x >= 0.0; }
 
-double stampOrNow(const ros::Time& stamp) { return (stamp.isZero() ? ros::Time::now() : stamp).toSec(); }
 
 // JSON text of a scalar parameter value (strings quoted), or "" for lists and dictionaries.
 std::string jsonOfParam(XmlRpc::XmlRpcValue& v) {
@@ -80,6 +79,7 @@ bool FlightMonitor::Config::validate(std::string* why) const {
   if (!(finitePositive(startup_timeout_s) && startup_timeout_s <= 86400.0))
     err << "startup_timeout_s must be in (0, 86400]; ";
   if (!(finiteNonNegative(resend_period_s) && resend_period_s <= 3600.0)) err << "resend_period_s must be in [0, 3600]; ";
+  if (!(finiteNonNegative(resend_settle_s) && resend_settle_s <= 3600.0)) err << "resend_settle_s must be in [0, 3600]; ";
   if (!(finitePositive(check_period_s) && check_period_s <= 10.0)) err << "check_period_s must be in (0, 10]; ";
   if (name.empty() || name.find('/') != std::string::npos) err << "name must be a non-empty file name stem; ";
   const std::string s = err.str();
@@ -112,6 +112,14 @@ bool readFlightMonitorParams(const ros::NodeHandle& pnh, FlightMonitor::Config* 
   FlightRecorder::Config& rc = c.recorder;
   r.read("goal_tolerance_m", rc.goal_tolerance_m);
   r.read("goal_max_speed_mps", rc.goal_max_speed_mps);
+  std::string mission = rc.pass_through ? "waypoints" : "sequential";
+  r.read("mission", mission);
+  if (mission == "waypoints") {
+    rc.pass_through = true;
+  } else if (mission != "sequential") {
+    r.errors() << "mission must be sequential or waypoints, not '" << mission << "'; ";
+  }
+  r.read("waypoint_tolerance_m", rc.waypoint_tolerance_m);
   r.read("goal_timeout_s", rc.goal_timeout_s);
   r.read("collision_radius_m", rc.collision_radius_m);
   r.read("contact_release_m", rc.contact_release_m);
@@ -129,6 +137,11 @@ bool readFlightMonitorParams(const ros::NodeHandle& pnh, FlightMonitor::Config* 
   r.read("start_delay_s", c.start_delay_s);
   r.read("startup_timeout_s", c.startup_timeout_s);
   r.read("resend_period_s", c.resend_period_s);
+  r.read("resend_settle_s", c.resend_settle_s);
+  r.read("ground_truth_topic", c.ground_truth_topic);
+  r.read("setpoint_jump_margin_m", rc.setpoints.jump_margin_m);
+  r.read("reanchor_tolerance_m", rc.setpoints.reanchor_tolerance_m);
+  r.read("reanchor_window_s", rc.setpoints.reanchor_window_s);
   double margin_m = 1.5, max_distance_m = 2.0;
   int num_threads = 1;
   r.read("truth/margin_m", margin_m);
@@ -171,7 +184,12 @@ bool readFlightMonitorParams(const ros::NodeHandle& pnh, FlightMonitor::Config* 
 // Construction
 
 FlightMonitor::FlightMonitor(const ros::NodeHandle& nh, const ros::NodeHandle& pnh, const Config& config)
-    : nh_(nh), pnh_(pnh), config_(config), recorder_(config.recorder, config.goals) {}
+    : nh_(nh),
+      pnh_(pnh),
+      config_(config),
+      recorder_(config.recorder, config.goals),
+      clock_(0.5),
+      resend_(config.resend_settle_s) {}
 
 std::unique_ptr<FlightMonitor> FlightMonitor::create(const ros::NodeHandle& nh, const ros::NodeHandle& pnh,
                                                      const Config& config, std::string* error) {
@@ -184,6 +202,7 @@ std::unique_ptr<FlightMonitor> FlightMonitor::create(const ros::NodeHandle& nh, 
   FlightMonitor* self = m.get();
   m->waypoint_pub_ = m->nh_.advertise<nav_msgs::Path>("planning/waypoints", 1, true);
   m->result_pub_ = m->pnh_.advertise<topo_planner::FlightResult>("result", 1, true);
+  m->report_pub_ = m->pnh_.advertise<std_msgs::String>("report", 1, true);
   m->cloud_topic_ = m->nh_.resolveName("map_generator/global_cloud");
   m->truth_sub_ = std::make_unique<TruthMapSubscriber>(
       m->nh_, m->cloud_topic_, config.truth, "flight_monitor",
@@ -192,6 +211,15 @@ std::unique_ptr<FlightMonitor> FlightMonitor::create(const ros::NodeHandle& nh, 
   m->collision_sub_ = m->nh_.subscribe("quadrotor/collision", 50, &FlightMonitor::collisionCallback, self);
   m->replan_sub_ = m->nh_.subscribe("planning/replan_event", 100, &FlightMonitor::replanCallback, self);
   m->reference_sub_ = m->nh_.subscribe("planning/reference_path", 10, &FlightMonitor::referenceCallback, self);
+  if (!config.ground_truth_topic.empty())
+    m->truth_state_sub_ = m->nh_.subscribe(config.ground_truth_topic, 400, &FlightMonitor::truthCallback, self,
+                                           ros::TransportHints().tcpNoDelay());
+  m->setpoint_sub_ = m->nh_.subscribe("planning/position_cmd", 200, &FlightMonitor::setpointCallback, self,
+                                      ros::TransportHints().tcpNoDelay());
+  m->heartbeat_sub_ = m->nh_.subscribe("planning/heartbeat", 50, &FlightMonitor::heartbeatCallback, self);
+  m->fault_sub_ = m->nh_.subscribe("quadrotor_sim/fault_event", 50, &FlightMonitor::faultCallback, self);
+  m->offset_sub_ = m->nh_.subscribe("quadrotor_sim/odom_offset", 10, &FlightMonitor::offsetCallback, self,
+                                    ros::TransportHints().tcpNoDelay());
   m->check_timer_ = m->nh_.createTimer(ros::Duration(config.check_period_s), &FlightMonitor::checkTimer, self);
   m->startup_timer_ = m->nh_.createSteadyTimer(ros::WallDuration(config.startup_timeout_s),
                                                &FlightMonitor::startupTimeout, self, /*oneshot=*/true);
@@ -221,7 +249,15 @@ void FlightMonitor::odomCallback(const nav_msgs::OdometryConstPtr& msg) {
     ROS_WARN_THROTTLE(5.0, "flight_monitor: odometry ignored: %s", why.c_str());
     return;
   }
-  const double t = stampOrNow(msg->header.stamp);
+  // Without a ground truth the odometry is the stream that shows ROS time steps (its blackouts
+  // would too: fault injection needs the ground truth).
+  double t;
+  if (config_.ground_truth_topic.empty() && !msg->header.stamp.isZero()) {
+    t = last_stream_t_s_ = clock_.addStreamStamp(msg->header.stamp.toSec());
+    have_stream_time_ = true;
+  } else {
+    t = timeOf(msg->header.stamp);
+  }
   have_odom_ = true;
   last_odom_t_s_ = t;
   if (!recorder_.started() || done_ || !truth_) return;
@@ -230,14 +266,88 @@ void FlightMonitor::odomCallback(const nav_msgs::OdometryConstPtr& msg) {
   s.t_s = t;
   s.position_m = state.position;
   s.velocity_mps = state.velocity;
-  // The ground is an obstacle too (the simulator counts touching it as a collision).
-  s.clearance_m = std::min(truth_->obstacleDistance(s.position_m, config_.clearance_exact_within_m),
-                           s.position_m.z() - config_.ground_z_m);
+  s.clearance_m = config_.ground_truth_topic.empty() ? clearanceAt(s.position_m) : std::nan("");
   handle(recorder_.addOdometry(s), t);
 }
 
+double FlightMonitor::nowS() const {
+  // The steady stream's latest time: ros::Time::now() right after a step, before the stream has
+  // shown it, would be off by the step.
+  return have_stream_time_ ? last_stream_t_s_ : timeOf(ros::Time());
+}
+
+double FlightMonitor::timeOf(const ros::Time& stamp) const {
+  return clock_.correct((stamp.isZero() ? ros::Time::now() : stamp).toSec());
+}
+
+double FlightMonitor::clearanceAt(const Eigen::Vector3d& p) const {
+  // The ground is an obstacle too (the simulator counts touching it as a collision).
+  return std::min(truth_->obstacleDistance(p, config_.clearance_exact_within_m), p.z() - config_.ground_z_m);
+}
+
+void FlightMonitor::truthCallback(const nav_msgs::OdometryConstPtr& msg) {
+  Quadrotor::State state;
+  std::string why;
+  if (msg->header.stamp.isZero() || !odometryToState(*msg, false, &state, &why)) {
+    ROS_WARN_THROTTLE(5.0, "flight_monitor: ground truth ignored: %s", why.c_str());
+    return;
+  }
+  const double t = last_stream_t_s_ = clock_.addStreamStamp(msg->header.stamp.toSec());
+  have_stream_time_ = true;
+  if (!recorder_.started() || done_ || !truth_) return;
+  OdometrySample s;
+  s.t_s = t;
+  s.position_m = state.position;
+  s.velocity_mps = state.velocity;
+  s.clearance_m = clearanceAt(s.position_m);
+  recorder_.addTruth(s);
+}
+
+void FlightMonitor::setpointCallback(const topo_planner::PositionCommandConstPtr& msg) {
+  SetpointSample s;
+  s.t_s = timeOf(msg->header.stamp);
+  s.position_m = Eigen::Vector3d(msg->position.x, msg->position.y, msg->position.z);
+  s.velocity_mps = Eigen::Vector3d(msg->velocity.x, msg->velocity.y, msg->velocity.z);
+  s.acceleration_mps2 = Eigen::Vector3d(msg->acceleration.x, msg->acceleration.y, msg->acceleration.z);
+  const int jumps = recorder_.setpoints().stats().jumps;
+  recorder_.addSetpoint(s);
+  if (recorder_.setpoints().stats().jumps > jumps) {
+    const SetpointStep& st = recorder_.setpoints().stats().steps.back();
+    ROS_WARN("flight_monitor: SETPOINT JUMP of %.2f m (allowed %.2f m) from (%.2f %.2f %.2f) to (%.2f %.2f %.2f)",
+             (st.to_m - st.from_m).norm(), st.allowed_m, st.from_m.x(), st.from_m.y(), st.from_m.z(), st.to_m.x(),
+             st.to_m.y(), st.to_m.z());
+  }
+}
+
+void FlightMonitor::heartbeatCallback(const topo_planner::PlannerHeartbeatConstPtr& msg) {
+  const double t = nowS();
+  if (resend_.onHeartbeat(msg->planner_session, msg->inputs_ok, t) && recorder_.started() && !done_)
+    ROS_WARN("flight_monitor: the planner restarted (session %lu): goal %d goes again once its inputs are fresh",
+             (unsigned long)msg->planner_session, recorder_.activeGoal() + 1);
+}
+
+void FlightMonitor::faultCallback(const std_msgs::StringConstPtr& msg) {
+  std::istringstream words(msg->data);
+  std::string kind, phase;
+  words >> kind >> phase;
+  const double t = nowS();
+  recorder_.addFault(t, kind, phase, msg->data);
+  if (!recorder_.started() || done_) return;
+  ROS_WARN("flight_monitor: injected fault: %s", msg->data.c_str());
+  if (phase == "end" || phase == "step") resend_.onFaultCleared(t);
+  if (kind == "odom_blackout" && phase == "end") recorder_.addOdometryReturn(t);
+}
+
+void FlightMonitor::offsetCallback(const geometry_msgs::Vector3StampedConstPtr& msg) {
+  const Eigen::Vector3d offset(msg->vector.x, msg->vector.y, msg->vector.z);
+  if (!offset.allFinite()) return;
+  const Eigen::Vector3d delta = offset - odom_offset_;
+  odom_offset_ = offset;
+  if (!delta.isZero()) recorder_.addOdometryJump(timeOf(msg->header.stamp), delta);
+}
+
 void FlightMonitor::collisionCallback(const topo_planner::CollisionConstPtr& msg) {
-  const double t = stampOrNow(msg->header.stamp);
+  const double t = timeOf(msg->header.stamp);
   if (recorder_.started() && !done_) {
     ROS_WARN_THROTTLE(1.0, "flight_monitor: COLLISION at (%.2f, %.2f, %.2f), clearance %.3f m (simulator count %u)",
                       msg->position.x, msg->position.y, msg->position.z, msg->clearance_m, msg->count);
@@ -247,7 +357,7 @@ void FlightMonitor::collisionCallback(const topo_planner::CollisionConstPtr& msg
 
 void FlightMonitor::replanCallback(const topo_planner::ReplanEventConstPtr& msg) {
   ReplanRecord r;
-  r.t_s = stampOrNow(msg->header.stamp);
+  r.t_s = timeOf(msg->header.stamp);
   r.position_m = Eigen::Vector3d(msg->position.x, msg->position.y, msg->position.z);
   r.trigger = msg->trigger;
   r.status = msg->status;
@@ -262,7 +372,7 @@ void FlightMonitor::replanCallback(const topo_planner::ReplanEventConstPtr& msg)
 void FlightMonitor::referenceCallback(const nav_msgs::PathConstPtr& msg) {
   ReferenceRecord r;
   r.id = int(references_.size());
-  r.t_s = ros::Time::now().toSec();
+  r.t_s = nowS();
   r.points_m.reserve(msg->poses.size());
   for (const geometry_msgs::PoseStamped& p : msg->poses) {
     const Eigen::Vector3d q(p.pose.position.x, p.pose.position.y, p.pose.position.z);
@@ -273,24 +383,33 @@ void FlightMonitor::referenceCallback(const nav_msgs::PathConstPtr& msg) {
 
 void FlightMonitor::checkTimer(const ros::TimerEvent&) {
   if (done_) return;
-  const ros::Time now = ros::Time::now();
+  const double now = nowS();
   if (!recorder_.started()) {
     if (!notReadyReason().empty()) {
-      ready_since_ = ros::Time();
+      ready_since_s_ = -1.0;
       return;
     }
-    if (ready_since_.isZero()) ready_since_ = now;
-    if ((now - ready_since_).toSec() < config_.start_delay_s) return;
+    if (ready_since_s_ < 0.0) ready_since_s_ = now;
+    if (now - ready_since_s_ < config_.start_delay_s) return;
     startup_timer_.stop();
     ROS_INFO("flight_monitor: true map, odometry and planner ready: starting the flight");
-    handle(recorder_.start(now.toSec()), now.toSec());
+    handle(recorder_.start(now), now);
     return;
   }
-  handle(recorder_.checkTimeout(now.toSec()), now.toSec());
-  if (done_ || config_.resend_period_s <= 0.0 || planned_since_goal_) return;
-  if ((now - goal_sent_at_).toSec() >= config_.resend_period_s) {
+  handle(recorder_.checkTimeout(now), now);
+  if (done_) return;
+  if (resend_.due(now)) {
+    ROS_WARN("flight_monitor: planner restarted or fault cleared %.1f s ago: sending goal %d again",
+             config_.resend_settle_s, recorder_.activeGoal() + 1);
+    ++goal_resends_;
+    sendGoal(recorder_.activeGoal());
+    return;
+  }
+  if (config_.resend_period_s <= 0.0 || planned_since_goal_) return;
+  if (now - goal_sent_t_s_ >= config_.resend_period_s) {
     ROS_WARN("flight_monitor: no planning call since goal %d was sent %.1f s ago: sending it again",
-             recorder_.activeGoal() + 1, (now - goal_sent_at_).toSec());
+             recorder_.activeGoal() + 1, now - goal_sent_t_s_);
+    ++goal_resends_;
     sendGoal(recorder_.activeGoal());
   }
 }
@@ -300,7 +419,7 @@ void FlightMonitor::startupTimeout(const ros::SteadyTimerEvent&) {
   const std::string why = "not ready after " + std::to_string(int(config_.startup_timeout_s)) +
                           " s (wall time): " + notReadyReason();
   ROS_ERROR("flight_monitor: %s", why.c_str());
-  recorder_.finish(ros::Time::now().toSec(), FlightStatus::kNoStart, why);
+  recorder_.finish(nowS(), FlightStatus::kNoStart, why);
   finishFlight(true);
 }
 
@@ -321,16 +440,21 @@ void FlightMonitor::sendGoal(int index) {
   nav_msgs::Path path;
   path.header.stamp = ros::Time::now();
   path.header.frame_id = config_.frame_id;
-  geometry_msgs::PoseStamped pose;
-  pose.header = path.header;
-  pose.pose.position = toPoint(g);
-  pose.pose.orientation.w = 1.0;
-  path.poses.push_back(pose);
+  // Sequential: the one goal; waypoints: every goal from this one on (the mission's remaining goals).
+  const size_t end = config_.recorder.pass_through ? config_.goals.size() : size_t(index) + 1;
+  for (size_t i = size_t(index); i < end; ++i) {
+    geometry_msgs::PoseStamped pose;
+    pose.header = path.header;
+    pose.pose.position = toPoint(config_.goals[i]);
+    pose.pose.orientation.w = 1.0;
+    path.poses.push_back(pose);
+  }
   waypoint_pub_.publish(path);
-  goal_sent_at_ = path.header.stamp;
+  goal_sent_t_s_ = timeOf(path.header.stamp);
   planned_since_goal_ = false;
-  ROS_INFO("flight_monitor: goal %d/%zu sent: (%.2f, %.2f, %.2f)", index + 1, config_.goals.size(), g.x(), g.y(),
-           g.z());
+  const std::string more = path.poses.size() > 1 ? " and the " + std::to_string(path.poses.size() - 1) + " after it" : "";
+  ROS_INFO("flight_monitor: goal %d/%zu sent: (%.2f, %.2f, %.2f)%s", index + 1, config_.goals.size(), g.x(), g.y(),
+           g.z(), more.c_str());
 }
 
 void FlightMonitor::handle(const FlightRecorder::Update& update, double now_s) {
@@ -341,7 +465,8 @@ void FlightMonitor::handle(const FlightRecorder::Update& update, double now_s) {
   if (update.goal_timed_out >= 0)
     ROS_WARN("flight_monitor: %s",
              formatGoalLine(recorder_.goals()[size_t(update.goal_timed_out)], n, recorder_.startTime(), now_s).c_str());
-  if (update.next_goal >= 0) sendGoal(update.next_goal);
+  // A waypoint mission was sent whole: passing a waypoint sends nothing.
+  if (update.next_goal >= 0 && (!config_.recorder.pass_through || update.goal_reached < 0)) sendGoal(update.next_goal);
   if (update.finished) finishFlight(true);
 }
 
@@ -363,6 +488,7 @@ void FlightMonitor::finishFlight(bool publish) {
   done_ = true;
   check_timer_.stop();
   startup_timer_.stop();
+  recorder_.setCounters(resend_.restarts(), goal_resends_, clock_.steps());
   const FlightSummary s = recorder_.summary();
 
   if (publish && ros::ok()) {
@@ -384,6 +510,9 @@ void FlightMonitor::finishFlight(bool publish) {
     r.duration_s = s.duration_s;
     r.path_length_m = s.path_length_m;
     result_pub_.publish(r);
+    std_msgs::String report;
+    report.data = reportJson(s, recorder_.goals(), recorder_.startTime(), reportInfo(), &recorder_);
+    report_pub_.publish(report);
   }
   // Goals sent but neither reached nor timed out (an interrupted flight) get their line too.
   for (const GoalRecord& g : recorder_.goals())
@@ -395,6 +524,17 @@ void FlightMonitor::finishFlight(bool publish) {
     log(Level::kInfo, "done, shutting down (shutdown_when_done)");
     ros::requestShutdown();
   }
+}
+
+FlightReportInfo FlightMonitor::reportInfo() const {
+  FlightReportInfo info;
+  info.name = config_.name;
+  info.start_m = config_.start_m;
+  info.map_resolution_m = config_.truth.resolution_m;
+  info.map_occupied_voxels = truth_ ? truth_->numOccupied() : 0;
+  info.collision_radius_m = config_.recorder.collision_radius_m;
+  info.scenario = config_.scenario;
+  return info;
 }
 
 void FlightMonitor::writeFiles(const FlightSummary& summary) const {
@@ -409,20 +549,13 @@ void FlightMonitor::writeFiles(const FlightSummary& summary) const {
   const double t0 = recorder_.startTime();
   std::vector<ReferenceRecord> references = references_;
   for (ReferenceRecord& r : references) r.t_s -= t0;
-  FlightReportInfo info;
-  info.name = config_.name;
-  info.start_m = config_.start_m;
-  info.map_resolution_m = config_.truth.resolution_m;
-  info.map_occupied_voxels = truth_ ? truth_->numOccupied() : 0;
-  info.collision_radius_m = config_.recorder.collision_radius_m;
-  info.scenario = config_.scenario;
-
+  const FlightReportInfo info = reportInfo();
   std::string error;
   bool ok = writeTraceCsv(stem + ".csv", recorder_.trace(), &error) &&
             writeReplanCsv(stem + "_events.csv", recorder_.replans(), t0, &error) &&
             writeMapCsv(stem + "_map.csv", map_columns_, &error) &&
             writeReferenceCsv(stem + "_reference.csv", references, &error) &&
-            writeReportJson(stem + "_report.json", summary, recorder_.goals(), t0, info, &error);
+            writeReportJson(stem + "_report.json", summary, recorder_.goals(), t0, info, &error, &recorder_);
   if (ok) {
     log(Level::kInfo, "wrote " + stem + "{.csv,_events.csv,_map.csv,_reference.csv,_report.json}");
   } else {

@@ -82,6 +82,172 @@ std::vector<Eigen::Vector3d> occupiedColumns(const OccupancyMap& map) {
 }
 
 // ---------------------------------------------------------------------------------------------
+// SetpointWatch
+
+bool SetpointWatch::Config::validate(std::string* why) const {
+  std::ostringstream err;
+  if (!finiteNonNegative(jump_margin_m)) err << "setpoint jump_margin_m must be >= 0; ";
+  if (!finiteNonNegative(reanchor_tolerance_m)) err << "reanchor_tolerance_m must be >= 0; ";
+  if (!finiteNonNegative(reanchor_window_s)) err << "reanchor_window_s must be >= 0; ";
+  if (!(finitePositive(finite_difference_s) && max_finite_difference_s >= finite_difference_s &&
+        std::isfinite(max_finite_difference_s)))
+    err << "need 0 < finite_difference_s <= max_finite_difference_s; ";
+  if (!finiteNonNegative(min_speed_mps)) err << "min_speed_mps must be >= 0; ";
+  return finishWhy(err, why).empty();
+}
+
+SetpointWatch::SetpointWatch() : SetpointWatch(Config()) {}
+SetpointWatch::SetpointWatch(const Config& config) : config_(config) { assert(config.validate(nullptr)); }
+
+double SetpointWatch::lastSpeed() const {
+  return have_previous_ ? previous_.velocity_mps.norm() : std::numeric_limits<double>::quiet_NaN();
+}
+
+double SetpointWatch::lastDecel() const {
+  if (!have_previous_) return std::numeric_limits<double>::quiet_NaN();
+  const double speed = previous_.velocity_mps.norm();
+  if (speed < config_.min_speed_mps || speed <= 0.0) return 0.0;
+  return -previous_.acceleration_mps2.dot(previous_.velocity_mps) / speed;
+}
+
+void SetpointWatch::addOdometryJump(double t_s, const Eigen::Vector3d& delta_m) {
+  if (!std::isfinite(t_s) || !delta_m.allFinite() || delta_m.isZero()) return;
+  pending_.push_back({t_s, delta_m});
+}
+
+void SetpointWatch::addOdometryReturn(double t_s) {
+  if (std::isfinite(t_s)) returns_.push_back(t_s);
+}
+
+void SetpointWatch::setMeasuredPosition(const Eigen::Vector3d& p_m) {
+  if (!p_m.allFinite()) return;
+  measured_m_ = p_m;
+  have_measured_ = true;
+}
+
+void SetpointWatch::addSetpoint(const SetpointSample& s) {
+  if (!std::isfinite(s.t_s) || !s.position_m.allFinite() || !s.velocity_mps.allFinite() ||
+      !s.acceleration_mps2.allFinite())
+    return;
+  ++stats_.setpoints;
+  const double speed = s.velocity_mps.norm();
+  auto decel = [&](double d, double t, bool from_difference) {
+    if (d > stats_.max_decel_mps2) {
+      stats_.max_decel_mps2 = d;
+      stats_.max_decel_t_s = t;
+      stats_.max_decel_from_difference = from_difference;
+    }
+  };
+  // The acceleration field.
+  stats_.max_acc_mps2 = std::max(stats_.max_acc_mps2, s.acceleration_mps2.norm());
+  if (speed >= config_.min_speed_mps && speed > 0.0) decel(-s.acceleration_mps2.dot(s.velocity_mps) / speed, s.t_s, false);
+
+  const bool restart = have_previous_ && s.t_s < previous_.t_s;  // time went back: no allowance, no difference
+  if (restart) history_.clear();
+
+  // The step from the previous setpoint.
+  if (have_previous_) {
+    const double dt = restart ? 0.0 : s.t_s - previous_.t_s;
+    const double motion = std::max(previous_.velocity_mps.norm(), speed) * dt;
+    const Eigen::Vector3d step = s.position_m - previous_.position_m;
+    SetpointStep st;
+    st.t_s = s.t_s;
+    st.from_m = previous_.position_m;
+    st.to_m = s.position_m;
+    st.allowed_m = motion + config_.jump_margin_m;
+    if (step.norm() > st.allowed_m) {
+      pending_.erase(std::remove_if(pending_.begin(), pending_.end(),
+                                    [&](const PendingJump& p) { return s.t_s - p.t_s > config_.reanchor_window_s; }),
+                     pending_.end());
+      for (auto it = pending_.begin(); it != pending_.end(); ++it)
+        if ((step - it->delta_m).norm() <= motion + config_.reanchor_tolerance_m) {
+          st.reanchoring = true;
+          pending_.erase(it);
+          break;
+        }
+      returns_.erase(std::remove_if(returns_.begin(), returns_.end(),
+                                    [&](double t) { return s.t_s - t > config_.reanchor_window_s; }),
+                     returns_.end());
+      if (!st.reanchoring && !returns_.empty() && have_measured_ &&
+          (s.position_m - measured_m_).norm() <= motion + config_.reanchor_tolerance_m) {
+        st.reanchoring = true;
+        returns_.erase(returns_.begin());
+      }
+      if (st.reanchoring) {
+        ++stats_.reanchorings;
+      } else {
+        ++stats_.jumps;
+        stats_.max_excess_m = std::max(stats_.max_excess_m, step.norm() - st.allowed_m);
+      }
+      if (stats_.steps.size() < config_.max_steps_kept) stats_.steps.push_back(st);
+    }
+  }
+
+  // The finite difference of the velocity against the newest setpoint at least finite_difference_s older.
+  while (!history_.empty() && s.t_s - history_.front().t_s > config_.max_finite_difference_s) history_.pop_front();
+  for (auto it = history_.rbegin(); it != history_.rend(); ++it) {
+    const double dt = s.t_s - it->t_s;
+    if (dt < config_.finite_difference_s) continue;
+    const Eigen::Vector3d a = (s.velocity_mps - it->velocity_mps) / dt;
+    stats_.max_acc_mps2 = std::max(stats_.max_acc_mps2, a.norm());
+    const double v0 = it->velocity_mps.norm();
+    if (v0 >= config_.min_speed_mps && v0 > 0.0) decel(-a.dot(it->velocity_mps) / v0, s.t_s, true);
+    break;
+  }
+  history_.push_back(s);
+  previous_ = s;
+  have_previous_ = true;
+}
+
+// ---------------------------------------------------------------------------------------------
+// TimeStepFilter, GoalResendPolicy
+
+TimeStepFilter::TimeStepFilter(double max_gap_s, double max_back_s) : max_gap_s_(max_gap_s), max_back_s_(max_back_s) {
+  assert(max_gap_s > 0.0 && max_back_s >= 0.0);
+}
+
+double TimeStepFilter::addStreamStamp(double raw_s) {
+  if (!std::isfinite(raw_s)) return raw_s + correction_s_;
+  if (have_last_) {
+    const double d = raw_s - last_raw_s_;
+    if (d < -max_back_s_ || d > max_gap_s_) {
+      // corrected(raw_s) = corrected(last) + the previous interval
+      correction_s_ += last_interval_s_ - d;
+      ++steps_;
+    } else if (d > 0.0) {
+      last_interval_s_ = d;
+    }
+  }
+  have_last_ = true;
+  last_raw_s_ = raw_s;
+  return raw_s + correction_s_;
+}
+
+bool GoalResendPolicy::onHeartbeat(uint64_t planner_session, bool inputs_ok, double t_s) {
+  inputs_ok_ = inputs_ok;
+  const bool restart = have_session_ && planner_session != session_;
+  if (restart) {
+    ++restarts_;
+    pending_ = true;
+    due_t_s_ = t_s + settle_s_;
+  }
+  have_session_ = true;
+  session_ = planner_session;
+  return restart;
+}
+
+void GoalResendPolicy::onFaultCleared(double t_s) {
+  pending_ = true;
+  due_t_s_ = t_s + settle_s_;  // a later trigger postpones an earlier one
+}
+
+bool GoalResendPolicy::due(double t_s) {
+  if (!pending_ || t_s < due_t_s_ || !inputs_ok_) return false;
+  pending_ = false;
+  return true;
+}
+
+// ---------------------------------------------------------------------------------------------
 // FlightRecorder
 
 const char* toString(FlightStatus status) {
@@ -100,15 +266,19 @@ bool FlightRecorder::Config::validate(std::string* why) const {
   std::ostringstream err;
   if (!finitePositive(goal_tolerance_m)) err << "goal_tolerance_m must be positive; ";
   if (!finiteNonNegative(goal_max_speed_mps)) err << "goal_max_speed_mps must be >= 0 (0 = no speed condition); ";
+  if (!finitePositive(waypoint_tolerance_m)) err << "waypoint_tolerance_m must be positive; ";
   if (!(finitePositive(goal_timeout_s) && goal_timeout_s <= 1e6)) err << "goal_timeout_s must be in (0, 1e6]; ";
   if (!finiteNonNegative(collision_radius_m)) err << "collision_radius_m must be >= 0; ";
   if (!finiteNonNegative(contact_release_m)) err << "contact_release_m must be >= 0; ";
   if (!(finiteNonNegative(trace_period_s) && trace_period_s <= 3600.0)) err << "trace_period_s must be in [0, 3600]; ";
   if (!finitePositive(max_sample_gap_s)) err << "max_sample_gap_s must be positive; ";
+  std::string sub;
+  if (!setpoints.validate(&sub)) err << sub << "; ";
   return finishWhy(err, why).empty();
 }
 
-FlightRecorder::FlightRecorder(const Config& config, const std::vector<Eigen::Vector3d>& goals) : config_(config) {
+FlightRecorder::FlightRecorder(const Config& config, const std::vector<Eigen::Vector3d>& goals)
+    : config_(config), setpoint_watch_(config.setpoints) {
   assert(config.validate(nullptr));
   goals_.resize(goals.size());
   for (size_t i = 0; i < goals.size(); ++i) {
@@ -142,6 +312,7 @@ FlightRecorder::Update FlightRecorder::addOdometry(const OdometrySample& s) {
   if (have_previous_ && s.t_s < previous_.t_s) return update;  // out of order
   GoalRecord& goal = goals_[size_t(active_)];
   const double speed = s.velocity_mps.norm();
+  setpoint_watch_.setMeasuredPosition(s.position_m);
 
   if (have_previous_) {
     const double dt = s.t_s - previous_.t_s;
@@ -156,20 +327,7 @@ FlightRecorder::Update FlightRecorder::addOdometry(const OdometrySample& s) {
   max_speed_mps_ = std::max(max_speed_mps_, speed);
   goal.max_speed_mps = std::max(goal.max_speed_mps, speed);
 
-  if (std::isfinite(s.clearance_m)) {
-    if (!(s.clearance_m >= min_clearance_m_)) {  // also true while min_clearance_m_ is NaN
-      min_clearance_m_ = s.clearance_m;
-      min_clearance_position_m_ = s.position_m;
-    }
-    if (!(s.clearance_m >= goal.min_clearance_m)) goal.min_clearance_m = s.clearance_m;
-    if (!in_contact_ && s.clearance_m < config_.collision_radius_m) {
-      in_contact_ = true;
-      ++clearance_contacts_;
-      ++goal.clearance_contacts;
-    } else if (in_contact_ && s.clearance_m > config_.collision_radius_m + config_.contact_release_m) {
-      in_contact_ = false;
-    }
-  }
+  if (std::isfinite(s.clearance_m)) addClearance(s.position_m, s.clearance_m, &goal);
 
   // Rows on a fixed grid of trace_period_s (a sample within 1 ms before its slot takes it), so the
   // rate is exact even when odometry stamps jitter; after a gap the grid restarts at the sample.
@@ -179,8 +337,10 @@ FlightRecorder::Update FlightRecorder::addOdometry(const OdometrySample& s) {
     row.t_s = s.t_s - start_t_s_;
     row.position_m = s.position_m;
     row.velocity_mps = s.velocity_mps;
-    row.clearance_m = s.clearance_m;
+    row.clearance_m = std::isfinite(s.clearance_m) ? s.clearance_m : truth_clearance_m_;
     row.goal_index = active_;
+    row.commanded_speed_mps = setpoint_watch_.lastSpeed();
+    row.commanded_decel_mps2 = setpoint_watch_.lastDecel();
     trace_.push_back(row);
     next_trace_t_s_ = (trace_.size() == 1 ? s.t_s : next_trace_t_s_) + config_.trace_period_s;
     if (next_trace_t_s_ <= s.t_s) next_trace_t_s_ = s.t_s + config_.trace_period_s;
@@ -191,7 +351,9 @@ FlightRecorder::Update FlightRecorder::addOdometry(const OdometrySample& s) {
 
   goal.distance_m = (s.position_m - goal.goal_m).norm();
   const bool slow = config_.goal_max_speed_mps <= 0.0 || speed <= config_.goal_max_speed_mps;
-  if (goal.distance_m <= config_.goal_tolerance_m && slow) {
+  const bool waypoint = config_.pass_through && size_t(active_ + 1) < goals_.size();
+  if (waypoint ? goal.distance_m <= config_.waypoint_tolerance_m
+               : goal.distance_m <= config_.goal_tolerance_m && slow) {
     goal.reached = true;
     goal.reached_t_s = s.t_s;
     update.goal_reached = active_;
@@ -199,6 +361,58 @@ FlightRecorder::Update FlightRecorder::addOdometry(const OdometrySample& s) {
     return update;
   }
   return checkTimeout(s.t_s);
+}
+
+void FlightRecorder::addClearance(const Eigen::Vector3d& position_m, double clearance_m, GoalRecord* goal) {
+  if (!(clearance_m >= min_clearance_m_)) {  // also true while min_clearance_m_ is NaN
+    min_clearance_m_ = clearance_m;
+    min_clearance_position_m_ = position_m;
+  }
+  if (!(clearance_m >= goal->min_clearance_m)) goal->min_clearance_m = clearance_m;
+  if (!in_contact_ && clearance_m < config_.collision_radius_m) {
+    in_contact_ = true;
+    ++clearance_contacts_;
+    ++goal->clearance_contacts;
+  } else if (in_contact_ && clearance_m > config_.collision_radius_m + config_.contact_release_m) {
+    in_contact_ = false;
+  }
+}
+
+void FlightRecorder::addTruth(const OdometrySample& truth) {
+  if (!flying() || !std::isfinite(truth.t_s) || !truth.position_m.allFinite() || !truth.velocity_mps.allFinite())
+    return;
+  truth_speed_mps_ = truth.velocity_mps.norm();
+  if (!std::isfinite(truth.clearance_m)) return;
+  truth_clearance_m_ = truth.clearance_m;
+  addClearance(truth.position_m, truth.clearance_m, &goals_[size_t(active_)]);
+}
+
+void FlightRecorder::addSetpoint(const SetpointSample& setpoint) {
+  if (flying()) setpoint_watch_.addSetpoint(setpoint);
+}
+
+void FlightRecorder::addOdometryJump(double t_s, const Eigen::Vector3d& delta_m) {
+  setpoint_watch_.addOdometryJump(t_s, delta_m);
+}
+
+void FlightRecorder::addOdometryReturn(double t_s) { setpoint_watch_.addOdometryReturn(t_s); }
+
+void FlightRecorder::addFault(double t_s, const std::string& kind, const std::string& phase, const std::string& text) {
+  FaultRecord f;
+  f.t_s = t_s;
+  f.kind = kind;
+  f.phase = phase;
+  f.text = text;
+  f.commanded_speed_mps = setpoint_watch_.lastSpeed();
+  f.true_speed_mps = truth_speed_mps_;
+  f.goal_index = flying() ? active_ : -1;
+  faults_.push_back(f);
+}
+
+void FlightRecorder::setCounters(int planner_restarts, int goal_resends, int time_steps) {
+  planner_restarts_ = planner_restarts;
+  goal_resends_ = goal_resends;
+  time_steps_ = time_steps;
 }
 
 FlightRecorder::Update FlightRecorder::checkTimeout(double t_s) {
@@ -305,6 +519,17 @@ FlightSummary FlightRecorder::summary() const {
   s.replan_ms_max = percentile(ms, 1.0);
   if (started_) s.duration_s = (finished() ? end_t_s_ : last_t_s_) - start_t_s_;
   s.path_length_m = path_length_m_;
+  const SetpointWatch::Stats& w = setpoint_watch_.stats();
+  s.setpoints = w.setpoints;
+  s.setpoint_jumps = w.jumps;
+  s.reanchorings = w.reanchorings;
+  s.max_decel_mps2 = w.max_decel_mps2;
+  s.max_acc_mps2 = w.max_acc_mps2;
+  for (const FaultRecord& f : faults_)
+    if (f.goal_index >= 0 && f.phase != "end") ++s.faults_injected;
+  s.planner_restarts = planner_restarts_;
+  s.goal_resends = goal_resends_;
+  s.time_steps = time_steps_;
   return s;
 }
 
@@ -347,7 +572,12 @@ std::string formatReport(const FlightSummary& s, const std::string& name) {
     << "  replans              " << s.replans << " (" << s.replan_failures << " failed)\n"
     << "  replanning time      median " << fmt(s.replan_ms_median, 1) << " ms, p95 " << fmt(s.replan_ms_p95, 1)
     << " ms, max " << fmt(s.replan_ms_max, 1) << " ms\n"
-    << "  duration             " << fmt(s.duration_s, 1) << " s, path " << fmt(s.path_length_m, 1) << " m";
+    << "  duration             " << fmt(s.duration_s, 1) << " s, path " << fmt(s.path_length_m, 1) << " m\n"
+    << "  setpoints            " << s.setpoints << ", " << s.setpoint_jumps << " jumps, " << s.reanchorings
+    << " re-anchorings, worst deceleration " << fmt(s.max_decel_mps2, 2) << " m/s^2, worst acceleration "
+    << fmt(s.max_acc_mps2, 2) << " m/s^2\n"
+    << "  faults               " << s.faults_injected << " injected, " << s.planner_restarts << " planner restarts, "
+    << s.goal_resends << " goals re-sent, " << s.time_steps << " ROS time steps";
   return r.str();
 }
 
@@ -384,13 +614,14 @@ std::string jsonNumber(double x) {
 // Files
 
 bool writeTraceCsv(const std::string& path, const std::vector<TraceRow>& rows, std::string* error) {
-  std::string text = "t,x,y,z,vx,vy,vz,speed,clearance_m,goal_index\n";
-  text.reserve(rows.size() * 80 + text.size());
+  std::string text = "t,x,y,z,vx,vy,vz,speed,clearance_m,goal_index,cmd_speed,cmd_decel\n";
+  text.reserve(rows.size() * 96 + text.size());
   char line[512];
   for (const TraceRow& r : rows) {
-    std::snprintf(line, sizeof(line), "%.3f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%s,%d\n", r.t_s, r.position_m.x(),
-                  r.position_m.y(), r.position_m.z(), r.velocity_mps.x(), r.velocity_mps.y(), r.velocity_mps.z(),
-                  r.velocity_mps.norm(), fmt(r.clearance_m, 4).c_str(), r.goal_index);
+    std::snprintf(line, sizeof(line), "%.3f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%s,%d,%s,%s\n", r.t_s,
+                  r.position_m.x(), r.position_m.y(), r.position_m.z(), r.velocity_mps.x(), r.velocity_mps.y(),
+                  r.velocity_mps.z(), r.velocity_mps.norm(), fmt(r.clearance_m, 4).c_str(), r.goal_index,
+                  fmt(r.commanded_speed_mps, 4).c_str(), fmt(r.commanded_decel_mps2, 4).c_str());
     text += line;
   }
   return writeFile(path, text, error);
@@ -427,7 +658,13 @@ bool writeReferenceCsv(const std::string& path, const std::vector<ReferenceRecor
 }
 
 bool writeReportJson(const std::string& path, const FlightSummary& s, const std::vector<GoalRecord>& goals,
-                     double start_t_s, const FlightReportInfo& info, std::string* error) {
+                     double start_t_s, const FlightReportInfo& info, std::string* error,
+                     const FlightRecorder* recorder) {
+  return writeFile(path, reportJson(s, goals, start_t_s, info, recorder), error);
+}
+
+std::string reportJson(const FlightSummary& s, const std::vector<GoalRecord>& goals, double start_t_s,
+                       const FlightReportInfo& info, const FlightRecorder* recorder) {
   std::ostringstream j;
   j << "{\n"
     << "  \"name\": " << jsonString(info.name) << ",\n"
@@ -450,6 +687,15 @@ bool writeReportJson(const std::string& path, const FlightSummary& s, const std:
     << "  \"replan_ms_max\": " << jsonNumber(s.replan_ms_max) << ",\n"
     << "  \"duration_s\": " << jsonNumber(s.duration_s) << ",\n"
     << "  \"path_length_m\": " << jsonNumber(s.path_length_m) << ",\n"
+    << "  \"setpoints\": " << s.setpoints << ",\n"
+    << "  \"setpoint_jumps\": " << s.setpoint_jumps << ",\n"
+    << "  \"reanchorings\": " << s.reanchorings << ",\n"
+    << "  \"max_decel_mps2\": " << jsonNumber(s.max_decel_mps2) << ",\n"
+    << "  \"max_acc_mps2\": " << jsonNumber(s.max_acc_mps2) << ",\n"
+    << "  \"faults_injected\": " << s.faults_injected << ",\n"
+    << "  \"planner_restarts\": " << s.planner_restarts << ",\n"
+    << "  \"goal_resends\": " << s.goal_resends << ",\n"
+    << "  \"time_steps\": " << s.time_steps << ",\n"
     << "  \"start_m\": " << jsonVector(info.start_m) << ",\n"
     << "  \"map_resolution_m\": " << jsonNumber(info.map_resolution_m) << ",\n"
     << "  \"map_occupied_voxels\": " << info.map_occupied_voxels << ",\n"
@@ -475,8 +721,34 @@ bool writeReportJson(const std::string& path, const FlightSummary& s, const std:
       << ", \"replans\": " << g.replans << ", \"replan_failures\": " << g.replan_failures
       << ", \"collisions\": " << g.collisions() << "}";
   }
-  j << (goals.empty() ? "" : "\n  ") << "]\n}\n";
-  return writeFile(path, j.str(), error);
+  j << (goals.empty() ? "" : "\n  ") << "]";
+  if (recorder) {
+    const auto rel = [&](double t) { return jsonNumber(t - start_t_s); };
+    j << ",\n  \"faults\": [";
+    const std::vector<FaultRecord>& faults = recorder->faults();
+    for (size_t i = 0; i < faults.size(); ++i) {
+      const FaultRecord& f = faults[i];
+      j << (i ? ",\n" : "\n") << "    {\"t_s\": " << rel(f.t_s) << ", \"kind\": " << jsonString(f.kind)
+        << ", \"phase\": " << jsonString(f.phase) << ", \"commanded_speed_mps\": " << jsonNumber(f.commanded_speed_mps)
+        << ", \"true_speed_mps\": " << jsonNumber(f.true_speed_mps) << ", \"goal_index\": " << f.goal_index
+        << ", \"text\": " << jsonString(f.text) << "}";
+    }
+    j << (faults.empty() ? "" : "\n  ") << "],\n  \"setpoint_steps\": [";
+    const std::vector<SetpointStep>& steps = recorder->setpoints().stats().steps;
+    for (size_t i = 0; i < steps.size(); ++i) {
+      const SetpointStep& st = steps[i];
+      j << (i ? ",\n" : "\n") << "    {\"t_s\": " << rel(st.t_s) << ", \"from_m\": " << jsonVector(st.from_m)
+        << ", \"to_m\": " << jsonVector(st.to_m) << ", \"step_m\": " << jsonNumber((st.to_m - st.from_m).norm())
+        << ", \"allowed_m\": " << jsonNumber(st.allowed_m)
+        << ", \"reanchoring\": " << (st.reanchoring ? "true" : "false") << "}";
+    }
+    j << (steps.empty() ? "" : "\n  ") << "],\n  \"max_decel_t_s\": "
+      << rel(recorder->setpoints().stats().max_decel_t_s) << ",\n  \"max_decel_from\": "
+      << jsonString(recorder->setpoints().stats().max_decel_from_difference ? "velocity_difference"
+                                                                           : "acceleration");
+  }
+  j << "\n}\n";
+  return j.str();
 }
 
 }  // namespace topo_planner

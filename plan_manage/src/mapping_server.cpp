@@ -309,6 +309,15 @@ MappingServer::Stats MappingServer::stats() const {
   return s;
 }
 
+void MappingServer::clearMap(const std::string& why) {
+  {
+    std::unique_lock<std::shared_mutex> lock(map_mutex_);
+    occupancy_->clear();
+    esdf_->updateAll();
+  }
+  ROS_WARN("mapping: map cleared: %s", why.c_str());
+}
+
 void MappingServer::readMaps(const std::function<void(const OccupancyMap&, const EsdfMap&)>& fn) const {
   std::shared_lock<std::shared_mutex> lock(map_mutex_);
   fn(*occupancy_, *esdf_);

@@ -212,6 +212,7 @@ void PlannerServer::handle(const FsmOutput& out) {
   if (out.plan) publishPlanMarkers(*out.plan, out.trajectory ? &*out.trajectory : nullptr);
   else if (out.trajectory) publishPlanMarkers(ReplanResult(), &*out.trajectory);
   if (out.goal_reached) ROS_INFO("planner: goal reached");
+  if (out.odometry_jumped && config_.clear_map_on_odom_jump) mapping_->clearMap("the odometry jumped");
 }
 
 void PlannerServer::publishReference() {
@@ -322,6 +323,7 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   ReplanFsm::Config& f = c.fsm;
   r.read("odom_timeout_s", f.odom_timeout_s);
   r.read("vis_sample_s", c.vis_sample_s);
+  r.read("clear_map_on_odom_jump", c.clear_map_on_odom_jump);
   std::vector<double> goals;
   r.read("goals_m", goals);
   if (goals.size() % 3 != 0) r.errors() << "goals_m must hold x, y, z triples; ";

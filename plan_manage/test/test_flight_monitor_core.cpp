@@ -84,6 +84,23 @@ TEST(FlightRecorder, GoalReachedOnlyWhenCloseAndSlow) {
   EXPECT_NEAR(rec.summary().max_speed_mps, 2.0, 1e-12);
 }
 
+// Waypoints of one mission: the intermediate one counts when passed within 1 m at speed, the last
+// only close and slow.
+TEST(FlightRecorder, PassThroughWaypoints) {
+  FlightRecorder::Config c;
+  c.pass_through = true;
+  FlightRecorder rec(c, {Eigen::Vector3d(3, 0, 1), Eigen::Vector3d(3, 10, 1)});
+  rec.start(0.0);
+  EXPECT_EQ(rec.addOdometry(sample(1.0, Eigen::Vector3d(1.9, 0, 1), Eigen::Vector3d(3, 0, 0))).goal_reached, -1);
+  FlightRecorder::Update u = rec.addOdometry(sample(1.1, Eigen::Vector3d(2.2, 0.5, 1), Eigen::Vector3d(2, 2, 0)));
+  EXPECT_EQ(u.goal_reached, 0);  // 0.94 m away at 2.8 m/s
+  EXPECT_EQ(u.next_goal, 1);
+  EXPECT_EQ(rec.addOdometry(sample(4.0, Eigen::Vector3d(3, 9.5, 1), Eigen::Vector3d(0, 2, 0))).goal_reached, -1);
+  u = rec.addOdometry(sample(5.0, Eigen::Vector3d(3, 9.8, 1), Eigen::Vector3d(0, 0.2, 0)));
+  EXPECT_EQ(u.goal_reached, 1);
+  EXPECT_TRUE(u.finished);
+}
+
 TEST(FlightRecorder, ZeroSpeedLimitMeansAnySpeed) {
   FlightRecorder::Config c;
   c.goal_max_speed_mps = 0.0;
@@ -413,7 +430,8 @@ TEST(FlightFiles, WrittenAndReadable) {
 
   const auto trace = readLines(stem + ".csv");
   ASSERT_EQ(trace.size(), rec.trace().size() + 1);
-  EXPECT_EQ(trace[0], "t,x,y,z,vx,vy,vz,speed,clearance_m,goal_index");
+  EXPECT_EQ(trace[0], "t,x,y,z,vx,vy,vz,speed,clearance_m,goal_index,cmd_speed,cmd_decel");
+  EXPECT_NE(trace[1].find(",0,nan,nan"), std::string::npos) << trace[1];  // no setpoint yet
   EXPECT_EQ(trace[1].substr(0, 6), "0.000,");
   const auto events = readLines(stem + "_events.csv");
   ASSERT_EQ(events.size(), 2u);
@@ -435,6 +453,258 @@ TEST(FlightFiles, WrittenAndReadable) {
   EXPECT_FALSE(writeMapCsv((dir / "no" / "such" / "dir.csv").string(), {}, &error));
   EXPECT_NE(error.find("cannot write"), std::string::npos);
   std::filesystem::remove_all(dir);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Setpoints, time steps, goal re-sends, truth and faults
+
+constexpr double kSetpointDt = 0.01;  // the trajectory server's 100 Hz
+
+SetpointSample setpoint(double t, const Eigen::Vector3d& p, const Eigen::Vector3d& v,
+                        const Eigen::Vector3d& a = Eigen::Vector3d::Zero()) {
+  SetpointSample s;
+  s.t_s = t;
+  s.position_m = p;
+  s.velocity_mps = v;
+  s.acceleration_mps2 = a;
+  return s;
+}
+
+// Braking from 3 m/s at 2.5 m/s^2 along x, sampled exactly: no jump; the worst deceleration is
+// 2.5 m/s^2 from the field and from the finite differences (exact for a linear velocity).
+TEST(SetpointWatch, SmoothBrakingHasNoJumpAndItsDeceleration) {
+  SetpointWatch w;
+  const double v0 = 3.0, a = 2.5;
+  for (int i = 0; i * kSetpointDt <= v0 / a; ++i) {
+    const double t = i * kSetpointDt;
+    w.addSetpoint(setpoint(t, Eigen::Vector3d(v0 * t - 0.5 * a * t * t, 0, 1), Eigen::Vector3d(v0 - a * t, 0, 0),
+                           Eigen::Vector3d(-a, 0, 0)));
+  }
+  EXPECT_EQ(w.stats().jumps, 0);
+  EXPECT_EQ(w.stats().reanchorings, 0);
+  EXPECT_NEAR(w.stats().max_decel_mps2, a, 1e-9);
+  EXPECT_NEAR(w.stats().max_acc_mps2, a, 1e-9);
+  EXPECT_EQ(w.stats().setpoints, int(std::floor(v0 / a / kSetpointDt + 1e-9)) + 1);
+}
+
+// A velocity step (cruise to a hold at the same position, the trajectory server's old snap) has a
+// zero acceleration field: the finite difference over 0.05 s finds 3 / 0.05 = 60 m/s^2.
+TEST(SetpointWatch, VelocityStepShowsInTheFiniteDifference) {
+  SetpointWatch w;
+  double x = 0.0;
+  for (int i = 0; i < 100; ++i) {
+    w.addSetpoint(setpoint(i * kSetpointDt, Eigen::Vector3d(x, 0, 1), Eigen::Vector3d(3, 0, 0)));
+    x += 3.0 * kSetpointDt;
+  }
+  for (int i = 100; i < 120; ++i) w.addSetpoint(setpoint(i * kSetpointDt, Eigen::Vector3d(x, 0, 1), Eigen::Vector3d::Zero()));
+  EXPECT_EQ(w.stats().jumps, 0);
+  EXPECT_NEAR(w.stats().max_decel_mps2, 3.0 / 0.05, 1e-6);
+  EXPECT_TRUE(w.stats().max_decel_from_difference);
+  EXPECT_GE(w.stats().max_decel_t_s, 1.0 - 1e-9);  // found within 0.05 s of the step
+  EXPECT_LE(w.stats().max_decel_t_s, 1.05 + 1e-9);
+}
+
+// Random streams with inserted steps, against the definition evaluated pair by pair.
+TEST(SetpointWatch, JumpsMatchTheDefinitionOnRandomStreams) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::bernoulli_distribution insert(0.02);
+  for (int trial = 0; trial < 20; ++trial) {
+    SetpointWatch w;
+    std::vector<SetpointSample> stream;
+    Eigen::Vector3d p(0, 0, 1), v(2, 0, 0);
+    double t = 0.0;
+    for (int i = 0; i < 1000; ++i) {
+      t += kSetpointDt * (0.5 + 0.5 * std::abs(u(rng)));  // jittered intervals
+      v += 0.05 * Eigen::Vector3d(u(rng), u(rng), 0.0);
+      p += v * kSetpointDt;
+      if (insert(rng)) p += Eigen::Vector3d(u(rng), u(rng), u(rng)) * 0.3;  // a step, maybe below the margin
+      stream.push_back(setpoint(t, p, v));
+    }
+    int expected = 0;
+    for (size_t i = 1; i < stream.size(); ++i) {
+      const double allowed = std::max(stream[i - 1].velocity_mps.norm(), stream[i].velocity_mps.norm()) *
+                                 (stream[i].t_s - stream[i - 1].t_s) +
+                             0.05;
+      if ((stream[i].position_m - stream[i - 1].position_m).norm() > allowed) ++expected;
+    }
+    for (const SetpointSample& s : stream) w.addSetpoint(s);
+    EXPECT_EQ(w.stats().jumps, expected) << "trial " << trial;
+    EXPECT_GT(expected, 0);
+  }
+}
+
+// A step equal to an injected odometry jump, soon after it, re-anchors once; the same step again,
+// a different one, or one after the window are jumps.
+TEST(SetpointWatch, StepEqualToAnOdometryJumpIsAReanchoring) {
+  SetpointWatch::Config c;  // 0.25 m tolerance, 2 s window
+  SetpointWatch w(c);
+  double t = 0.0;
+  Eigen::Vector3d p(0, 0, 1);
+  const Eigen::Vector3d v(1, 0, 0);
+  auto cruise = [&](int n) {
+    for (int i = 0; i < n; ++i) {
+      t += kSetpointDt;
+      p += v * kSetpointDt;
+      w.addSetpoint(setpoint(t, p, v));
+    }
+  };
+  auto stepBy = [&](const Eigen::Vector3d& d) {
+    t += kSetpointDt;
+    p += v * kSetpointDt + d;
+    w.addSetpoint(setpoint(t, p, v));
+  };
+  cruise(10);
+  w.addOdometryJump(t, Eigen::Vector3d(1.0, 0.0, 0.0));
+  cruise(20);
+  stepBy(Eigen::Vector3d(1.1, 0.05, 0.0));  // the jump plus tracking error: re-anchoring
+  EXPECT_EQ(w.stats().reanchorings, 1);
+  EXPECT_EQ(w.stats().jumps, 0);
+  cruise(5);
+  stepBy(Eigen::Vector3d(1.0, 0.0, 0.0));  // consumed: now a jump
+  EXPECT_EQ(w.stats().jumps, 1);
+  w.addOdometryJump(t, Eigen::Vector3d(0.0, 1.0, 0.0));
+  cruise(5);
+  stepBy(Eigen::Vector3d(0.0, -1.0, 0.0));  // the opposite way: a jump
+  EXPECT_EQ(w.stats().jumps, 2);
+  cruise(300);                             // 3 s: past the window
+  stepBy(Eigen::Vector3d(0.0, 1.0, 0.0));
+  EXPECT_EQ(w.stats().jumps, 3);
+  EXPECT_EQ(w.stats().reanchorings, 1);
+  ASSERT_EQ(w.stats().steps.size(), 4u);
+  EXPECT_TRUE(w.stats().steps[0].reanchoring);
+  EXPECT_FALSE(w.stats().steps[1].reanchoring);
+  EXPECT_NEAR(w.stats().max_excess_m, 1.0 - 0.05, 1e-9);
+}
+
+// After an odometry blackout the vehicle (held by the flight controller) lags the commanded state
+// that ran on: a step onto the measured position soon after odometry returned re-anchors; a step
+// elsewhere, or one onto the measured position without a return, is a jump.
+TEST(SetpointWatch, StepOntoTheMeasuredPositionAfterABlackoutIsAReanchoring) {
+  SetpointWatch w;
+  const Eigen::Vector3d hold(-11.5, 0.0, 1.2);
+  w.setMeasuredPosition(hold);
+  w.addSetpoint(setpoint(5.0, Eigen::Vector3d(-10.4, 0.2, 1.3), Eigen::Vector3d::Zero()));
+  w.addSetpoint(setpoint(5.01, hold + Eigen::Vector3d(0.05, 0, 0), Eigen::Vector3d::Zero()));  // no return yet
+  EXPECT_EQ(w.stats().jumps, 1);
+  w.addSetpoint(setpoint(5.02, Eigen::Vector3d(-10.4, 0.2, 1.3), Eigen::Vector3d::Zero()));  // and back: a jump
+  EXPECT_EQ(w.stats().jumps, 2);
+  w.addOdometryReturn(5.03);
+  w.addSetpoint(setpoint(5.5, Eigen::Vector3d(-9.0, 0.2, 1.3), Eigen::Vector3d::Zero()));  // elsewhere: a jump
+  EXPECT_EQ(w.stats().jumps, 3);
+  w.addSetpoint(setpoint(5.6, hold + Eigen::Vector3d(0.05, 0, 0), Eigen::Vector3d::Zero()));  // onto it
+  EXPECT_EQ(w.stats().jumps, 3);
+  EXPECT_EQ(w.stats().reanchorings, 1);
+  w.addOdometryReturn(10.0);
+  w.addSetpoint(setpoint(12.5, Eigen::Vector3d(-10.0, 0.2, 1.3), Eigen::Vector3d::Zero()));
+  w.addSetpoint(setpoint(12.51, hold, Eigen::Vector3d::Zero()));  // past the 2 s window: a jump
+  EXPECT_EQ(w.stats().jumps, 5);
+}
+
+// A setpoint older than the previous one (an uncorrected time step) gets only the margin and no
+// finite difference across it.
+TEST(SetpointWatch, TimeGoingBackIsANewStart) {
+  SetpointWatch w;
+  w.addSetpoint(setpoint(10.0, Eigen::Vector3d(0, 0, 1), Eigen::Vector3d(3, 0, 0)));
+  w.addSetpoint(setpoint(10.1, Eigen::Vector3d(0.3, 0, 1), Eigen::Vector3d(3, 0, 0)));
+  w.addSetpoint(setpoint(7.0, Eigen::Vector3d(0.33, 0, 1), Eigen::Vector3d(0, 0, 0)));  // 3 cm: no jump
+  EXPECT_EQ(w.stats().jumps, 0);
+  EXPECT_DOUBLE_EQ(w.stats().max_decel_mps2, 0.0);  // no difference across the step back
+  w.addSetpoint(setpoint(6.0, Eigen::Vector3d(0.43, 0, 1), Eigen::Vector3d(0, 0, 0)));  // 10 cm: a jump
+  EXPECT_EQ(w.stats().jumps, 1);
+  EXPECT_NEAR(w.lastSpeed(), 0.0, 1e-12);
+}
+
+// A 200 Hz stream with a backward and a forward ROS time step: the corrected stamps go on at 5 ms.
+TEST(TimeStepFilter, StepsAreAbsorbed) {
+  TimeStepFilter f(0.5);
+  double raw = 100.0, previous = NAN;
+  for (int i = 0; i < 3000; ++i) {
+    if (i == 1000) raw -= 3.0;
+    if (i == 2000) raw += 5.0;
+    const double t = f.addStreamStamp(raw);
+    if (i > 0) {
+      EXPECT_NEAR(t - previous, kDt, 1e-9) << "at " << i;
+    }
+    previous = t;
+    raw += kDt;
+  }
+  EXPECT_EQ(f.steps(), 2);
+  EXPECT_NEAR(f.correction(), 3.0 - 5.0, 1e-9);
+  EXPECT_NEAR(f.correct(raw), previous + kDt, 1e-9);  // another topic's stamp, on the same flight time
+  // A small reordering (below max_back_s) is not a step.
+  TimeStepFilter g(0.5, 1e-3);
+  g.addStreamStamp(1.0);
+  g.addStreamStamp(0.9995);
+  EXPECT_EQ(g.steps(), 0);
+}
+
+TEST(GoalResendPolicy, RestartsAndClearedFaults) {
+  GoalResendPolicy p(1.0);
+  EXPECT_FALSE(p.onHeartbeat(42, true, 0.0));  // the first session
+  EXPECT_FALSE(p.onHeartbeat(42, true, 0.05));
+  EXPECT_FALSE(p.due(10.0));
+  EXPECT_TRUE(p.onHeartbeat(7, false, 10.0));  // restarted, inputs not fresh yet
+  EXPECT_EQ(p.restarts(), 1);
+  EXPECT_FALSE(p.due(10.5));                   // settling
+  EXPECT_FALSE(p.due(11.5));                   // inputs still stale
+  p.onHeartbeat(7, true, 11.6);
+  EXPECT_TRUE(p.due(11.6));
+  EXPECT_FALSE(p.due(11.7));  // once
+  p.onFaultCleared(20.0);
+  p.onFaultCleared(20.5);  // postpones
+  EXPECT_FALSE(p.due(21.2));
+  EXPECT_TRUE(p.due(21.5));
+  EXPECT_FALSE(p.due(30.0));
+  GoalResendPolicy no_heartbeat(0.5);  // without heartbeats the inputs count as fresh
+  no_heartbeat.onFaultCleared(1.0);
+  EXPECT_TRUE(no_heartbeat.due(1.5));
+}
+
+// Odometry without clearance (offset by a jump, or stopped) and the truth with it: the clearance,
+// the contacts and the trace come from the truth; faults are recorded with the speeds of the moment.
+TEST(FlightRecorder, TruthClearanceSetpointsAndFaults) {
+  FlightRecorder rec(FlightRecorder::Config(), {Eigen::Vector3d(10, 0, 1)});
+  rec.start(0.0);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  for (int i = 0; i <= 200; ++i) {
+    const double t = i * kDt;
+    const Eigen::Vector3d p(1.0 * t, 0, 1);
+    // The true clearance dips to 0.1 m (a contact) around t = 0.5 s.
+    const double clearance = std::abs(t - 0.5) < 0.05 ? 0.1 : 0.5 + t;
+    rec.addTruth(sample(t, p, Eigen::Vector3d(1, 0, 0), clearance));
+    rec.addOdometry(sample(t, p + Eigen::Vector3d(1, 0, 0), Eigen::Vector3d(1, 0, 0), nan));
+    if (i % 2 == 0) rec.addSetpoint(setpoint(t, p, Eigen::Vector3d(1, 0, 0)));
+  }
+  rec.addFault(0.5, "odom_blackout", "start", "odom_blackout start t=0.500 s until=1.000 s");
+  rec.addFault(0.8, "odom_blackout", "end", "odom_blackout end t=0.800 s");
+  rec.setCounters(1, 2, 0);
+  const FlightSummary s = rec.summary();
+  EXPECT_NEAR(s.min_clearance_m, 0.1, 1e-12);
+  EXPECT_NEAR(s.min_clearance_position_m.x(), 0.46, 0.011);  // the true position, not the odometry's
+  EXPECT_EQ(s.clearance_contacts, 1);
+  EXPECT_EQ(s.collisions, 1);
+  EXPECT_EQ(s.setpoints, 101);
+  EXPECT_EQ(s.setpoint_jumps, 0);
+  EXPECT_EQ(s.faults_injected, 1);  // the start, not the end
+  EXPECT_EQ(s.planner_restarts, 1);
+  EXPECT_EQ(s.goal_resends, 2);
+  ASSERT_EQ(rec.faults().size(), 2u);
+  EXPECT_NEAR(rec.faults()[0].commanded_speed_mps, 1.0, 1e-12);
+  EXPECT_NEAR(rec.faults()[0].true_speed_mps, 1.0, 1e-12);
+  EXPECT_EQ(rec.faults()[0].goal_index, 0);
+  for (const TraceRow& r : rec.trace()) EXPECT_TRUE(std::isfinite(r.clearance_m));
+  EXPECT_NEAR(rec.trace().back().commanded_speed_mps, 1.0, 1e-12);
+  EXPECT_NEAR(rec.trace().back().commanded_decel_mps2, 0.0, 1e-12);
+
+  FlightReportInfo info;
+  info.name = "t";
+  const std::string json = reportJson(s, rec.goals(), rec.startTime(), info, &rec);
+  EXPECT_NE(json.find("\"setpoint_jumps\": 0"), std::string::npos);
+  EXPECT_NE(json.find("\"planner_restarts\": 1"), std::string::npos);
+  EXPECT_NE(json.find("\"kind\": \"odom_blackout\", \"phase\": \"start\""), std::string::npos) << json;
+  EXPECT_NE(json.find("\"setpoint_steps\": []"), std::string::npos) << json;
+  EXPECT_NE(formatReport(s, "t").find("0 jumps"), std::string::npos);
 }
 
 TEST(FlightFiles, JsonValues) {

@@ -43,17 +43,35 @@ class PathByLength {
   Eigen::Vector3d direction_ = Eigen::Vector3d::Zero();
 };
 
-// Positions every `interval` of a stop from speed v along `path` at deceleration a, preceded by
-// `head` (positions at the same interval, the first being the start).
+// A stop from speed v: deceleration a, easing to 0 over the last kStopRamp seconds (a linear ramp),
+// so the spline fitted to it (which ends with zero acceleration) need not overshoot a to get there.
+// The ramp lengthens the stop by a kStopRamp^2 / 24 (4 mm at 2.5 m/s^2).
+struct StopProfile {
+  static constexpr double kStopRamp = 0.2;  // [s]
+  double v = 0.0, a = 1.0, ramp = 0.0, t1 = 0.0, v_r = 0.0;
+  StopProfile(double speed, double decel) : v(std::max(0.0, speed)), a(decel) {
+    ramp = std::min(kStopRamp, 2.0 * v / a);  // a slow vehicle ramps down all the way
+    v_r = 0.5 * a * ramp;                      // speed when the ramp starts
+    t1 = (v - v_r) / a;
+  }
+  double duration() const { return t1 + ramp; }
+  double distance(double tau) const {
+    tau = std::clamp(tau, 0.0, duration());
+    if (tau <= t1) return v * tau - 0.5 * a * tau * tau;
+    const double u = tau - t1, s1 = v * t1 - 0.5 * a * t1 * t1;
+    return s1 + v_r * u - a * (0.5 * u * u - u * u * u / (6.0 * ramp));
+  }
+};
+
+// Positions every `interval` of a stop from speed v along `path` (from arc length s0) at
+// deceleration a (StopProfile).
 std::vector<Eigen::Vector3d> stopPoints(const PathByLength& path, double s0, double v, double a, double* interval) {
-  const double T = v / a;
+  const StopProfile stop(v, a);
+  const double T = stop.duration();
   const int n = std::max(4, int(std::ceil(T / 0.05)));
   *interval = T > 0.0 ? T / n : 0.1;
   std::vector<Eigen::Vector3d> points;
-  for (int k = 0; k <= n; ++k) {
-    const double tau = k * *interval;
-    points.push_back(path.at(s0 + (T > 0.0 ? v * tau - 0.5 * a * tau * tau : 0.0)));
-  }
+  for (int k = 0; k <= n; ++k) points.push_back(path.at(s0 + (T > 0.0 ? stop.distance(k * *interval) : 0.0)));
   return points;
 }
 
@@ -135,6 +153,7 @@ bool ReplanFsm::Config::validate(std::string* why) const {
     return bad("time_jump_threshold_s must be positive");
   if (!(waypoint_reached_radius_m >= 0.0) || !std::isfinite(waypoint_reached_radius_m))
     return bad("waypoint_reached_radius_m must be >= 0");
+  if (!(max_start_velocity_step_mps >= 0.0)) return bad("max_start_velocity_step_mps must be >= 0");
   return true;
 }
 
@@ -201,8 +220,11 @@ void ReplanFsm::setDepthFused(double stamp_s, double arrival_s) {
   if (std::isnan(arrival_s)) arrival_s = stamp_s;
   if (!std::isfinite(stamp_s) || !std::isfinite(arrival_s)) return;
   std::lock_guard<std::mutex> lock(mutex_);
-  FsmOutput ignored;
-  observeClockLocked(arrival_s, &ignored);
+  // The caller may pass the same (last) frame again and again; only a new one counts. Its arrival is
+  // history, not the clock, so it does not feed the time-jump detection.
+  if (have_raw_depth_ && stamp_s == raw_depth_stamp_s_) return;
+  have_raw_depth_ = true;
+  raw_depth_stamp_s_ = stamp_s;
   if (have_depth_ && stamp_s < depth_stamp_s_) return;
   have_depth_ = true;
   depth_stamp_s_ = stamp_s;
@@ -270,10 +292,11 @@ void ReplanFsm::observeClockLocked(double now, FsmOutput* out) {
   // A time jump: everything stamped on the old clock moves with it, so the commanded motion goes
   // on where it was (the trajectory server shifts its copy the same way) and inputs are not
   // taken for stale (or fresh) by the step alone.
-  if (current_) {
-    current_->start_time_s += shift;
-    current_->brake_start_s += shift;
-  }
+  for (std::optional<ExecTrajectory>* traj : {&current_, &previous_})
+    if (*traj) {
+      (*traj)->start_time_s += shift;
+      (*traj)->brake_start_s += shift;
+    }
   odom_time_s_ += shift;
   odom_arrival_s_ += shift;
   depth_stamp_s_ += shift;
@@ -323,13 +346,22 @@ void ReplanFsm::setState(FsmState s, FsmOutput* out, const std::string& why) {
   state_ = s;
 }
 
+void ReplanFsm::replaceCurrentLocked(const ExecTrajectory& next) {
+  // The one it replaces is still flown until the new one's start time (a planned trajectory takes
+  // over takeover_delay_s after planning began): the state before then is on it.
+  if (current_) previous_ = current_;
+  current_ = next;
+}
+
 FlatState ReplanFsm::takeoverStateLocked(double t_takeover) const {
   if (!current_) {
     // Not commanded yet: the controller holds the position where it started.
     return FlatState::atRest(odom_position_);
   }
-  const UniformBspline& s = current_->spline;
-  const double tau = std::clamp(t_takeover - current_->start_time_s, 0.0, s.duration());
+  const ExecTrajectory& flown =
+      previous_ && t_takeover < current_->start_time_s && previous_->start_time_s <= t_takeover ? *previous_ : *current_;
+  const UniformBspline& s = flown.spline;
+  const double tau = std::clamp(t_takeover - flown.start_time_s, 0.0, s.duration());
   FlatState st;
   st.position = s.evaluate(tau);
   const UniformBspline vel = s.derivative();
@@ -402,14 +434,11 @@ ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::s
       start_acc = -a * s0.velocity / speed;
     } else {
       const Eigen::Vector3d u = s0.velocity / speed;
-      const double T = speed / a;
-      const int n = std::max(4, int(std::ceil(T / 0.05)));
-      interval = T / n;
-      for (int k = 0; k <= n; ++k) {
-        const double tau = k * interval;
-        points.push_back(s0.position + u * (speed * tau - 0.5 * a * tau * tau));
-      }
-      start_acc = -a * u;
+      const StopProfile stop(speed, a);
+      const int n = std::max(4, int(std::ceil(stop.duration() / 0.05)));
+      interval = stop.duration() / n;
+      for (int k = 0; k <= n; ++k) points.push_back(s0.position + u * stop.distance(k * interval));
+      start_acc = -a * u;  // the profile starts at full deceleration (also when it is all ramp)
     }
     ExecTrajectory brake;
     brake.start_time_s = t;
@@ -426,7 +455,8 @@ ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::s
   double a = config_.brake_acc_mps2;
   ExecTrajectory brake = brakeAt(a);
   double hit = firstCollisionTime(brake, t, map);
-  while (hit >= 0.0 && speed >= 0.05 && a < config_.max_brake_acc_mps2) {
+  // (Not from a re-anchored state: after an odometry jump the map is in the old frame.)
+  while (hit >= 0.0 && speed >= 0.05 && a < config_.max_brake_acc_mps2 && !from) {
     a = std::min(config_.max_brake_acc_mps2, 1.25 * a);
     brake = brakeAt(a);
     hit = firstCollisionTime(brake, t, map);
@@ -493,7 +523,8 @@ bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const 
   }
   // Flown as planned to tau_b, then a stop along the same path, refitted as one spline.
   const double tau_b = taus[kb], v_b = speed[kb];
-  const double T_stop = v_b > 1e-3 ? v_b / a_stop : 0.0, T_total = tau_b + T_stop;
+  const StopProfile stop(v_b, a_stop);
+  const double T_stop = v_b > 1e-3 ? stop.duration() : 0.0, T_total = tau_b + T_stop;
   const PathByLength path(plan, tau_b, 0.01);
   const UniformBspline acc = vel.derivative();
   const Eigen::Vector3d v0 = vel.evaluate(0.0), a0 = acc.evaluate(0.0);
@@ -509,8 +540,7 @@ bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const 
       if (tau <= tau_b) {
         points.push_back(plan.evaluate(tau));
       } else {
-        const double u = std::min(tau - tau_b, T_stop);
-        points.push_back(path.at(v_b * u - 0.5 * a_stop * u * u));
+        points.push_back(path.at(stop.distance(tau - tau_b)));
       }
     }
     UniformBspline fitted;
@@ -675,7 +705,14 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
   ExecTrajectory traj;
   if (result.status == ReplanStatus::kSuccess) {
     std::string why;
-    if (!commitToKnownSpace(result.trajectory, t_take, map, &traj, &why)) {
+    const double step = (result.trajectory.derivative().evaluate(0.0) - request.start.velocity).norm();
+    if (step > config_.max_start_velocity_step_mps) {
+      char text[128];
+      std::snprintf(text, sizeof(text), "its start velocity is %.2f m/s off the commanded one (limit %.2f)", step,
+                    config_.max_start_velocity_step_mps);
+      result.status = ReplanStatus::kOptimizationFailed;
+      result.message += (result.message.empty() ? "" : "; ") + std::string(text);
+    } else if (!commitToKnownSpace(result.trajectory, t_take, map, &traj, &why)) {
       result.status = ReplanStatus::kOptimizationFailed;
       result.message += (result.message.empty() ? "" : "; ") + why;
     }
@@ -702,7 +739,7 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
       traj.reference_end_s = traj.reference_start_s + frac * (traj.reference_end_s - traj.reference_start_s);
     }
     traj.ends_at_goal = !traj.stops_before_unknown && result.local_goal_time_s >= reference.duration() - 1e-6;
-    current_ = traj;
+    replaceCurrentLocked(traj);
     collision_ahead_ = false;
     consecutive_failures_ = 0;
     event.published = true;
@@ -734,7 +771,7 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
     if (!escape && !escape_report.empty()) event.message += "; " + escape_report;
     if (escape) {
       escape->id = next_id_++;
-      current_ = *escape;
+      replaceCurrentLocked(*escape);
       collision_ahead_ = false;
       event.published = true;
       event.fallback = "escape";
@@ -870,7 +907,7 @@ void ReplanFsm::emergencyStopLocked(double t, const EsdfMap& map, const std::str
   event.position = brake.spline.evaluate(0.0);
   event.message = reason + "; " + report;
   event.published = true;
-  current_ = brake;
+  replaceCurrentLocked(brake);
   collision_ahead_ = false;
   setState(FsmState::kEmergencyStop, out, event.message);
   out->trajectory = brake;
@@ -894,9 +931,8 @@ FsmOutput ReplanFsm::checkSafety(double t, const EsdfMap& map) {
   }
   // Odometry far from where the vehicle was commanded to be at its stamp (a VIO jump): hold at the
   // measured position, moving on with the commanded velocity to a stop; replanned from there.
-  const double tracking_error = odom_time_s_ >= current_->start_time_s
-                                    ? (odom_position_ - takeoverStateLocked(odom_time_s_).position).norm()
-                                    : 0.0;
+  const bool covered = odom_time_s_ >= current_->start_time_s || (previous_ && odom_time_s_ >= previous_->start_time_s);
+  const double tracking_error = covered ? (odom_position_ - takeoverStateLocked(odom_time_s_).position).norm() : 0.0;
   if (tracking_error > config_.max_tracking_error_m) {
     FlatState from = takeoverStateLocked(t);
     from.position = odom_position_ + from.velocity * std::max(0.0, t - odom_time_s_);
@@ -905,6 +941,7 @@ FsmOutput ReplanFsm::checkSafety(double t, const EsdfMap& map) {
     std::snprintf(text, sizeof(text), "odometry %.2f m from the commanded position (limit %.2f m): holding at the "
                   "measured position", tracking_error, config_.max_tracking_error_m);
     emergencyStopLocked(t, map, text, &out, &from, ReplanStatus::kInvalidInput);
+    out.odometry_jumped = true;
     return out;
   }
   // Braking and escapes were checked when made and are not replanned (they end at rest).

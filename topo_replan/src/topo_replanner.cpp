@@ -52,6 +52,7 @@ bool TopoReplanner::Config::validate(std::string* why) const {
     err << "max_local_goal_extension_m must be >= 0; ";
   if (!(reference_sample_s >= 1e-4 && reference_sample_s < 1.0)) err << "reference_sample_s must be in [1e-4, 1); ";
   if (!(control_point_spacing_m > 0.0)) err << "control_point_spacing_m must be positive; ";
+  if (!(max_start_velocity_step_mps >= 0.0)) err << "max_start_velocity_step_mps must be >= 0; ";
   if (!(max_search_start_offset_m >= 0.0 && max_search_start_offset_m <= 5.0))
     err << "max_search_start_offset_m must be in [0, 5]; ";
   if (num_threads < 1 || num_threads > 64) err << "num_threads must be in [1, 64]; ";
@@ -271,8 +272,13 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
       ReplanCandidate& c = result.candidates[first + size_t(i)];
       c.guide = guides[size_t(i)];
       c.result = optimizers_[size_t(worker)].optimize(lp.initial, c.guide, map);
-      if (c.result.status == OptimizationStatus::kSuccess)
+      if (c.result.status == OptimizationStatus::kSuccess) {
         c.selection_cost = c.result.cost.jerk_integral_m2ps5 + config_.duration_weight * c.result.cost.duration_s;
+        // Time reallocation scaled the start velocity: restore it here, per candidate, so the choice
+        // can prefer a candidate that joins the current trajectory without a velocity step.
+        c.start_repaired = repairStart(request.start, map, &c.result.spline);
+        c.start_velocity_step_mps = (c.result.spline.derivative().evaluate(0.0) - request.start.velocity).norm();
+      }
     });
     result.stats.optimize_ms += msSince(t_opt);
     result.stats.paths += int(guides.size());
@@ -280,7 +286,15 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
       const ReplanCandidate& c = result.candidates[i];
       if (!std::isfinite(c.selection_cost)) continue;
       ++result.stats.feasible_candidates;
-      if (result.chosen < 0 || c.selection_cost < result.candidates[size_t(result.chosen)].selection_cost)
+      // Least cost among the candidates that keep the start velocity (within
+      // max_start_velocity_step_mps); among all only when none does.
+      auto joins = [&](const ReplanCandidate& k) { return k.start_velocity_step_mps <= config_.max_start_velocity_step_mps; };
+      if (result.chosen < 0) {
+        result.chosen = int(i);
+        continue;
+      }
+      const ReplanCandidate& best = result.candidates[size_t(result.chosen)];
+      if ((joins(c) && !joins(best)) || (joins(c) == joins(best) && c.selection_cost < best.selection_cost))
         result.chosen = int(i);
     }
   };
@@ -327,7 +341,7 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
   }
   result.status = ReplanStatus::kSuccess;
   result.trajectory = result.candidates[size_t(result.chosen)].result.spline;
-  result.stats.start_repaired = repairStart(request.start, map, &result.trajectory);
+  result.stats.start_repaired = result.candidates[size_t(result.chosen)].start_repaired;
   result.stats.start_velocity_jump_mps = (result.trajectory.derivative().evaluate(0.0) - request.start.velocity).norm();
   result.stats.total_ms = msSince(t_begin);
   return result;

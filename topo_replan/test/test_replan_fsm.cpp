@@ -8,6 +8,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <thread>
 
 #include "plan_env/synthetic_scene.h"
@@ -149,7 +150,11 @@ FlightLog fly(ReplanFsm* fsm, const Eigen::Vector3d& start, const std::vector<Ei
 // its velocity.
 void expectContinuous(const std::vector<ExecTrajectory>& trajs, double max_velocity_step_mps = 0.2) {
   for (size_t i = 1; i < trajs.size(); ++i) {
-    const ExecTrajectory &a = trajs[i - 1], &b = trajs[i];
+    // b takes over from the trajectory flown at its start: the newest earlier one that has started
+    // (one published just before may not have started yet when b is a stop that starts at once).
+    size_t j = i - 1;
+    while (j > 0 && trajs[j].start_time_s > trajs[i].start_time_s + 1e-9) --j;
+    const ExecTrajectory &a = trajs[j], &b = trajs[i];
     const double tau = std::clamp(b.start_time_s - a.start_time_s, 0.0, a.spline.duration());
     EXPECT_LT((a.spline.evaluate(tau) - b.spline.evaluate(0.0)).norm(), 1e-6) << "trajectory " << b.id;
     if (!b.braking) {
@@ -289,6 +294,11 @@ TEST(ReplanFsm, BrakesHarderWhenAnObstacleIsSeenLate) {
   const double deceleration = brake->spline.derivative().derivative().evaluate(0.0).norm();
   EXPECT_GT(deceleration, 1.2 * config.brake_acc_mps2);
   EXPECT_LE(deceleration, config.max_brake_acc_mps2 + 1e-6);
+  // Nowhere harder than that (the stop eases out instead of overshooting to meet zero acceleration).
+  double peak = 0.0;
+  const UniformBspline acc = brake->spline.derivative().derivative();
+  for (double tau = 0.0; tau <= brake->spline.duration(); tau += 0.005) peak = std::max(peak, acc.evaluate(tau).norm());
+  EXPECT_LE(peak, 1.1 * deceleration);
   EXPECT_GT(log.min_clearance, config.safety_clearance_m);
   EXPECT_FALSE(log.goal_reached);
   expectContinuous(log.trajectories);
@@ -358,7 +368,9 @@ TEST(ReplanFsm, FliesSeededHighDensityForestsToTheirGoals) {
     EXPECT_TRUE(log.goal_reached) << "seed " << seed;
     braked += log.braked;
     EXPECT_GT(log.min_clearance, config.safety_clearance_m) << "seed " << seed;
-    expectContinuous(log.trajectories, 0.3);  // one step of 0.28 m/s when written (a failed refit)
+    // At most the FSM's max_start_velocity_step_mps (a larger step is refused; 0.28 m/s happened
+    // before that rule).
+    expectContinuous(log.trajectories, config.max_start_velocity_step_mps + 1e-6);
     for (const FsmEvent& e : log.events) {
       ++events;
       failed += !e.published;
@@ -590,6 +602,42 @@ TEST(ReplanFsm, BrakesWhenOdometryStopsAndResumes) {
   EXPECT_TRUE(fsm->setOdometry(100.0, {1, 4, 1.5}, Eigen::Vector3d::Zero(), 100.0, &why));
   EXPECT_FALSE(fsm->setOdometry(99.9, {1, 4, 1.5}, Eigen::Vector3d::Zero(), 100.01, &why));
   EXPECT_NE(why.find("before the last"), std::string::npos) << why;
+}
+
+// A stop that comes after a plan was published but before it takes over starts from the trajectory
+// still being flown, not from the start of the one waiting (a setpoint jump of v x the delay).
+TEST(ReplanFsm, AStopBeforeAPendingTakeoverStartsFromTheTrajectoryFlown) {
+  Corridor c;
+  const EsdfMap& map = c.scene.finish();
+  ReplanFsm::Config config = testConfig();
+  config.takeover_delay_s = 0.4;  // room for the odometry timeout (0.25 s) before the takeover
+  config.max_takeover_delay_s = 0.5;
+  auto fsm = makeFsm(config);
+  PerfectVehicle vehicle{Eigen::Vector3d(1, 4, 1.5)};
+  ASSERT_TRUE(fsm->setOdometry(0.0, vehicle.position, vehicle.velocity));
+  ASSERT_EQ(fsm->setGoals({{22, 4, 1.5}}), GoalStatus::kAccepted);
+  std::optional<ExecTrajectory> flown, pending;
+  double t = 0.0;
+  for (int k = 0; k < 200 && !pending; ++k) {
+    t = k * 0.05;
+    vehicle.follow(*fsm, t);
+    fsm->setOdometry(t, vehicle.position, vehicle.velocity);
+    fsm->checkSafety(t, map);
+    const std::optional<ExecTrajectory> before = fsm->current();
+    const FsmOutput out = fsm->tick(t, map);
+    if (out.trajectory && before && t > 2.0) flown = before, pending = out.trajectory;
+  }
+  ASSERT_TRUE(pending);
+  ASSERT_GT(flown->spline.derivative().evaluate(t - flown->start_time_s).norm(), 1.0);  // cruising
+  // No odometry after t: at t + 0.3 it is stale, before the pending trajectory starts (t + 0.4).
+  const double t_stop = t + 0.3;
+  ASSERT_LT(t_stop, pending->start_time_s);
+  const FsmOutput out = fsm->checkSafety(t_stop, map);
+  ASSERT_TRUE(out.trajectory);
+  ASSERT_TRUE(out.trajectory->braking);
+  const double tau = t_stop - flown->start_time_s;
+  EXPECT_LT((out.trajectory->spline.evaluate(0.0) - flown->spline.evaluate(tau)).norm(), 1e-6);
+  EXPECT_LT((out.trajectory->spline.derivative().evaluate(0.0) - flown->spline.derivative().evaluate(tau)).norm(), 1e-6);
 }
 
 // A 1 m odometry jump (VIO relocalisation) at cruise speed: the FSM holds at the measured position,

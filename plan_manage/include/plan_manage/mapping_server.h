@@ -158,6 +158,10 @@ class MappingServer {
   const Config& config() const { return config_; }
   Stats stats() const;
 
+  /// Forgets the map (every voxel unknown), e.g. after the odometry jumped: what was mapped in the
+  /// old frame would sit in the wrong place in the new one.
+  void clearMap(const std::string& why);
+
   /// Calls fn(occupancy, esdf) under the shared lock (for an in-process planner).
   void readMaps(const std::function<void(const OccupancyMap&, const EsdfMap&)>& fn) const;
 

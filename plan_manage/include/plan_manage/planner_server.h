@@ -60,6 +60,8 @@ class PlannerServer {
     double safety_period_s = 0.05;      ///< safety check period [s]
     std::vector<Eigen::Vector3d> goals; ///< a mission flown once odometry arrives (param goals_m)
     double vis_sample_s = 0.05;         ///< time step of the trajectory markers [s]
+    /// Forget the map when the odometry jumps (the FSM holds, then replans in the space seen anew).
+    bool clear_map_on_odom_jump = true;
   };
 
   static std::unique_ptr<PlannerServer> create(const ros::NodeHandle& nh, const Config& config, std::string* error);

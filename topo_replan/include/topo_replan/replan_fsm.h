@@ -137,6 +137,9 @@ struct FsmOutput {
   std::optional<ReplanResult> plan;               ///< its full result (candidates etc., for rviz)
   bool new_reference = false;                     ///< reference() changed
   bool goal_reached = false;                      ///< the last goal of the mission was reached
+  /// Odometry jumped away from the commanded state (a VIO relocalisation): the map built in the old
+  /// frame no longer lines up with the new one; the caller may forget it.
+  bool odometry_jumped = false;
   std::string message;                            ///< a notable transition, for the log
 };
 
@@ -186,6 +189,9 @@ class ReplanFsm {
     /// An intermediate goal counts as reached (and is left out of rebuilt references) once the vehicle
     /// came this close to it [m].
     double waypoint_reached_radius_m = 1.0;
+    /// A plan whose start velocity differs from the commanded one by more than this (the replanner
+    /// could not restore it after time reallocation) is not published: setpoints never step [m/s].
+    double max_start_velocity_step_mps = 0.1;
 
     bool validate(std::string* why) const;
   };
@@ -199,6 +205,7 @@ class ReplanFsm {
   bool setOdometry(double t, const Eigen::Vector3d& position, const Eigen::Vector3d& velocity,
                    double arrival_s = NAN, std::string* why = nullptr);
   /// The mapping fused a depth frame (or cloud) stamped stamp_s, at arrival_s (NaN: at stamp_s).
+  /// Passing the same stamp again is a no-op (the caller may poll the mapping's last frame).
   void setDepthFused(double stamp_s, double arrival_s = NAN);
   /// Freshness of the inputs at clock t.
   InputHealth inputHealth(double t) const;
@@ -229,7 +236,10 @@ class ReplanFsm {
   // All *Locked functions expect mutex_ held.
   void setState(FsmState s, FsmOutput* out, const std::string& why);
   bool startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out);
+  /// The commanded state at t_takeover: on the current trajectory, or on the one it replaced when
+  /// t_takeover comes before the current one's start.
   FlatState takeoverStateLocked(double t_takeover) const;
+  void replaceCurrentLocked(const ExecTrajectory& next);
   double referenceTimeAtLocked(double t) const;
   /// Time to stop from the commanded speed at t at brake_acc_mps2, plus the emergency margin and the
   /// takeover delay: a collision (or the end of a trajectory that ends moving) closer than this
@@ -272,6 +282,8 @@ class ReplanFsm {
   bool have_odom_ = false;
   double odom_time_s_ = 0.0;
   double odom_arrival_s_ = 0.0;
+  bool have_raw_depth_ = false;   // the last stamp passed to setDepthFused, as passed
+  double raw_depth_stamp_s_ = 0.0;
   bool have_depth_ = false;
   double depth_stamp_s_ = 0.0;
   double depth_arrival_s_ = 0.0;
@@ -290,6 +302,7 @@ class ReplanFsm {
   GoalStatus last_goal_status_ = GoalStatus::kAccepted;
   PolynomialTrajectory reference_;
   std::optional<ExecTrajectory> current_;
+  std::optional<ExecTrajectory> previous_;  // the one current_ replaced: flown until current_ starts
   int64_t next_id_ = 0;
   bool collision_ahead_ = false;  // set by checkSafety, consumed by tick
   int consecutive_failures_ = 0;

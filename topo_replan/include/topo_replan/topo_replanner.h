@@ -89,6 +89,8 @@ struct ReplanCandidate {
   Path guide;
   OptimizationResult result;
   double selection_cost = INFINITY;  ///< see the class comment; +inf when it failed
+  bool start_repaired = false;          ///< its start velocity was restored after time reallocation
+  double start_velocity_step_mps = 0.0; ///< what remains of the start velocity's change [m/s]
 };
 
 struct ReplanStats {
@@ -138,6 +140,10 @@ class TopoReplanner {
     double max_local_goal_extension_m = 5.0;
     double reference_sample_s = 0.01;     ///< time step of the reference check, at least 1e-4 [s]
     double control_point_spacing_m = 0.35;  ///< initial spline: about one control point per this [m]
+    /// Candidates whose start velocity differs from the start state's by more than this (time
+    /// reallocation scaled it and the refit that restores it failed its check) are chosen only when
+    /// no other candidate passed [m/s].
+    double max_start_velocity_step_mps = 0.1;
     /// A start that keeps the optimiser's clearance but not the search's (a trajectory may pass an
     /// obstacle closer than the search's clearance, and replanning starts on it) is moved up the
     /// distance field at most this far for the search [m]. 0: such a start is kStartInCollision.

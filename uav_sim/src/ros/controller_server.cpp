@@ -2,6 +2,7 @@
 
 #include <topo_planner/RotorCommand.h>
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -17,6 +18,8 @@ bool ControllerServer::Config::validate(std::string* why) const {
   if (!vehicle.validate(&core)) err << "vehicle: " << core << "; ";
   if (!(std::isfinite(command_timeout_s) && command_timeout_s > 0.0 && command_timeout_s <= 3600.0))
     err << "command_timeout_s must be in (0, 3600]; ";
+  if (!(std::isfinite(max_odom_interval_s) && max_odom_interval_s > 0.0 && max_odom_interval_s <= 3600.0))
+    err << "max_odom_interval_s must be in (0, 3600]; ";
   const std::string s = err.str();
   if (why) *why = s.empty() ? "" : s.substr(0, s.size() - 2);
   return s.empty();
@@ -33,6 +36,7 @@ bool readControllerParams(const ros::NodeHandle& pnh, ControllerServer::Config* 
   r.read("min_thrust_ratio", c.gains.min_thrust_ratio);
   r.read("max_thrust_ratio", c.gains.max_thrust_ratio);
   r.read("command_timeout_s", c.command_timeout_s);
+  r.read("max_odom_interval_s", c.max_odom_interval_s);
   r.read("odom_twist_in_world", c.odom_twist_in_world);
   readVehicleParams(r, &c.vehicle);
   std::string range;
@@ -84,6 +88,18 @@ void ControllerServer::odomCallback(const nav_msgs::OdometryConstPtr& msg) {
     ROS_WARN_THROTTLE(1.0, "geometric_controller: refusing odometry: %s", why.c_str());
     return;
   }
+  const ros::Time now = ros::Time::now();
+  if (!last_odom_stamp_.isZero() && have_command_) {
+    const double interval = (msg->header.stamp - last_odom_stamp_).toSec();
+    if (interval < 0.0 || interval > config_.max_odom_interval_s) {
+      // A ROS time step (or an odometry gap): keep the command's age as it was at the last odometry.
+      const double age = std::max(0.0, (last_odom_stamp_ - command_time_).toSec());
+      command_time_ = now.toSec() > age ? now - ros::Duration(age) : ros::Time(0, 1);
+      ROS_WARN("geometric_controller: odometry stamps moved by %.3f s: a time step or a gap; command age kept at %.2f s",
+               interval, age);
+    }
+  }
+  last_odom_stamp_ = msg->header.stamp;
   if (!have_reference_) {  // start: hover where the vehicle is
     reference_ = TrackingReference();
     reference_.position = state.position;
@@ -91,7 +107,7 @@ void ControllerServer::odomCallback(const nav_msgs::OdometryConstPtr& msg) {
     have_reference_ = true;
     ROS_INFO("geometric_controller: hovering at (%.2f %.2f %.2f) until the first position command", state.position.x(),
              state.position.y(), state.position.z());
-  } else if (have_command_ && !holding_ && (ros::Time::now() - command_time_).toSec() > config_.command_timeout_s) {
+  } else if (have_command_ && !holding_ && (now - command_time_).toSec() > config_.command_timeout_s) {
     const double yaw = reference_.yaw;
     reference_ = TrackingReference();
     reference_.position = state.position;

@@ -123,6 +123,9 @@ std::unique_ptr<DepthCameraServer> DepthCameraServer::create(const ros::NodeHand
   s->pose_pub_ = s->nh_.advertise<geometry_msgs::PoseStamped>("camera/pose", 2);
   s->odom_sub_ =
       s->nh_.subscribe("odom", 1, &DepthCameraServer::odomCallback, s.get(), ros::TransportHints().tcpNoDelay());
+  s->blackout_sub_ = s->nh_.subscribe("quadrotor_sim/depth_blackout", 10, &DepthCameraServer::blackoutCallback, s.get());
+  s->offset_sub_ = s->nh_.subscribe("quadrotor_sim/odom_offset", 10, &DepthCameraServer::offsetCallback, s.get(),
+                                    ros::TransportHints().tcpNoDelay());
   // The render thread: the map build and the frames.
   ros::NodeHandle render_nh(s->nh_);
   render_nh.setCallbackQueue(&s->render_queue_);
@@ -146,6 +149,24 @@ void DepthCameraServer::odomCallback(const nav_msgs::OdometryConstPtr& msg) {
   latest_odom_ = msg;
 }
 
+void DepthCameraServer::blackoutCallback(const std_msgs::BoolConstPtr& msg) {
+  std::lock_guard<std::mutex> lock(odom_mutex_);
+  if (msg->data != blackout_)
+    ROS_WARN("depth_camera: %s", msg->data ? "depth blackout (injected fault): no images until it ends"
+                                           : "depth blackout over: images again");
+  blackout_ = msg->data;
+}
+
+void DepthCameraServer::offsetCallback(const geometry_msgs::Vector3StampedConstPtr& msg) {
+  const Eigen::Vector3d offset(msg->vector.x, msg->vector.y, msg->vector.z);
+  if (!offset.allFinite()) return;
+  std::lock_guard<std::mutex> lock(odom_mutex_);
+  if (!offset.isApprox(odom_offset_))
+    ROS_WARN("depth_camera: odometry offset (injected jump) now (%.2f %.2f %.2f) m: rendering from the true pose",
+             offset.x(), offset.y(), offset.z());
+  odom_offset_ = offset;
+}
+
 void DepthCameraServer::renderCallback(const ros::TimerEvent&) {
   const std::shared_ptr<const TruthMap> map = truth_->map();
   if (!map) {
@@ -158,11 +179,20 @@ void DepthCameraServer::renderCallback(const ros::TimerEvent&) {
     camera_map_ = map;
   }
   nav_msgs::OdometryConstPtr odom;
+  bool blackout;
+  Eigen::Vector3d offset;
   {
     std::lock_guard<std::mutex> lock(odom_mutex_);
     odom = latest_odom_;
+    blackout = blackout_;
+    offset = odom_offset_;
   }
   if (!odom || odom->header.stamp == last_rendered_stamp_) return;  // nothing new to see
+  if (blackout) {
+    ++blackout_frames_;
+    last_rendered_stamp_ = odom->header.stamp;
+    return;
+  }
   const ros::Time now = ros::Time::now();
   if ((now - odom->header.stamp).toSec() > config_.max_odom_age_s) {
     ROS_WARN_THROTTLE(5.0, "depth_camera: the latest odometry is %.2f s old: no frame",
@@ -179,10 +209,12 @@ void DepthCameraServer::renderCallback(const ros::TimerEvent&) {
   Eigen::Isometry3d T_world_body = Eigen::Isometry3d::Identity();
   T_world_body.linear() = body.orientation.toRotationMatrix();
   T_world_body.translation() = body.position;
-  const Eigen::Isometry3d T_world_camera = T_world_body * config_.T_body_camera;
+  const Eigen::Isometry3d T_world_camera = T_world_body * config_.T_body_camera;  // as the estimator says
+  Eigen::Isometry3d T_true_body = T_world_body;  // where the camera really is (odometry jumps removed)
+  T_true_body.translation() -= offset;
 
   const auto t0 = std::chrono::steady_clock::now();
-  if (!camera_->render(T_world_camera, &depth_)) return;
+  if (!camera_->render(T_true_body * config_.T_body_camera, &depth_)) return;
   const double render_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   last_rendered_stamp_ = odom->header.stamp;
 
@@ -244,9 +276,12 @@ void DepthCameraServer::renderCallback(const ros::TimerEvent&) {
     const double ros_s = (now - period_start_).toSec();
     const double rate = ros_s > 0.0 ? period_frames_ / ros_s : 0.0;
     const double mean_ms = period_render_ms_ / period_frames_;
-    ROS_INFO("depth_camera: %lu frames, %.1f Hz (asked %.1f), render %.1f ms mean, %.1f ms max", (unsigned long)frames_,
-             rate, config_.rate_hz, mean_ms, period_max_render_ms_);
-    if (rate < 0.9 * config_.rate_hz)
+    ROS_INFO("depth_camera: %lu frames, %.1f Hz (asked %.1f), render %.1f ms mean, %.1f ms max, %lu withheld "
+             "(depth blackout)",
+             (unsigned long)frames_, rate, config_.rate_hz, mean_ms, period_max_render_ms_,
+             (unsigned long)blackout_frames_);
+    // A blackout in the period explains a low rate (a clock step may also show as one).
+    if (rate < 0.9 * config_.rate_hz && blackout_frames_ == period_blackout_start_)
       ROS_WARN(
           "depth_camera: publishing %.1f Hz of the %.1f Hz asked: a frame takes %.0f ms to render; ticks that "
           "find the renderer busy are skipped, not queued",
@@ -254,6 +289,7 @@ void DepthCameraServer::renderCallback(const ros::TimerEvent&) {
     period_start_wall_ = wall;
     period_start_ = now;
     period_frames_ = 0;
+    period_blackout_start_ = blackout_frames_;
     period_render_ms_ = period_max_render_ms_ = 0.0;
   }
 }

@@ -169,7 +169,8 @@ bool MapGeneratorServer::load(std::string* error) {
   OccupancyMap::Config base;
   base.resolution_m = config_.scenario.map_resolution_m;
   base.max_memory_mb = 2048.0;
-  map_ = OccupancyMap::create(configFittingMapFile(file, base, 0.0), &why);
+  // One voxel of margin: a point on the bounds' upper faces lies in the voxel above them.
+  map_ = OccupancyMap::create(configFittingMapFile(file, base, base.resolution_m), &why);
   if (!map_) {
     if (error) *error = "cannot hold map_file " + config_.map_file + ": " + why;
     return false;

@@ -1,10 +1,14 @@
 #include "uav_sim/ros/quadrotor_sim.h"
 
 #include <geometry_msgs/TransformStamped.h>
+#include <geometry_msgs/Vector3Stamped.h>
 #include <rosgraph_msgs/Clock.h>
+#include <std_msgs/Bool.h>
+#include <std_msgs/String.h>
 #include <topo_planner/Collision.h>
 
 #include <cmath>
+#include <cstdio>
 #include <sstream>
 
 #include "uav_sim/ros/conversions.h"
@@ -78,6 +82,10 @@ bool QuadrotorSim::Config::validate(std::string* why) const {
   if (!(finiteNonNegative(truth_map_margin_m) && truth_map_margin_m <= 100.0))
     err << "truth_map_margin_m must be in [0, 100]; ";
   if (!(finiteNonNegative(map_wait_s) && map_wait_s <= 3600.0)) err << "map_wait_s must be in [0, 3600]; ";
+  if (!faults.validate(clock_start_s, &core)) err << "faults: " << core << "; ";
+  if (!faults.clock_steps.empty() && !publish_clock) err << "faults/clock_steps need publish_clock (sim time); ";
+  if (!(finiteNonNegative(faults_start_on_speed_mps) && faults_start_on_speed_mps <= 100.0))
+    err << "faults/start_on_speed_mps must be in [0, 100]; ";
   if (!(finitePositive(status_period_s) && status_period_s <= 1e6)) err << "status_period_s must be positive; ";
   if (scenario.start_m.z() < ground_z_m) err << "/sim/start_m is below the ground; ";
   const std::string s = err.str();
@@ -125,6 +133,15 @@ bool readQuadrotorSimParams(const ros::NodeHandle& pnh, QuadrotorSim::Config* co
   r.read("truth_map_margin_m", c.truth_map_margin_m);
   r.read("map_wait_s", c.map_wait_s);
   r.read("status_period_s", c.status_period_s);
+  std::vector<double> depth_blackouts, odom_blackouts, odom_jumps, clock_steps;
+  r.read("faults/depth_blackouts_s", depth_blackouts);
+  r.read("faults/odom_blackouts_s", odom_blackouts);
+  r.read("faults/odom_jumps", odom_jumps);
+  r.read("faults/clock_steps", clock_steps);
+  r.read("faults/start_on_speed_mps", c.faults_start_on_speed_mps);
+  std::string fault_error;
+  if (!FaultSchedule::fromLists(depth_blackouts, odom_blackouts, odom_jumps, clock_steps, &c.faults, &fault_error))
+    r.errors() << "faults: " << fault_error << "; ";
   if (use_sim_time && !c.publish_clock)
     r.errors() << "/use_sim_time is true but publish_clock is false: nothing would drive the clock; ";
   if (!use_sim_time && c.publish_clock)
@@ -169,6 +186,9 @@ std::unique_ptr<QuadrotorSim> QuadrotorSim::create(const ros::NodeHandle& nh, co
   s.truth_pub_ = s.pnh_.advertise<nav_msgs::Odometry>("ground_truth", 10);
   s.collision_pub_ = s.nh_.advertise<topo_planner::Collision>("quadrotor/collision", 10);
   if (config.publish_clock) s.clock_pub_ = s.nh_.advertise<rosgraph_msgs::Clock>("/clock", 10);
+  s.depth_blackout_pub_ = s.pnh_.advertise<std_msgs::Bool>("depth_blackout", 1, /*latch=*/true);
+  s.odom_offset_pub_ = s.pnh_.advertise<geometry_msgs::Vector3Stamped>("odom_offset", 1, /*latch=*/true);
+  s.fault_event_pub_ = s.pnh_.advertise<std_msgs::String>("fault_event", 20);
   s.static_broadcaster_.sendTransform(
       toTransform(config.T_body_camera, ros::Time(config.clock_start_s), config.body_frame, config.camera_frame));
 
@@ -184,6 +204,14 @@ std::unique_ptr<QuadrotorSim> QuadrotorSim::create(const ros::NodeHandle& nh, co
   ROS_INFO("quadrotor_sim: start (%.2f %.2f %.2f) hovering, %.0f Hz odometry, %s, collision radius %.2f m",
            start.position.x(), start.position.y(), start.position.z(), config.odom_rate_hz,
            config.publish_clock ? "publishing /clock" : "real time", config.collision_radius_m);
+  if (!config.faults.empty()) {
+    char origin[96];
+    if (config.faults_start_on_speed_mps > 0.0)
+      std::snprintf(origin, sizeof(origin), "the first moment faster than %.2f m/s", config.faults_start_on_speed_mps);
+    else
+      std::snprintf(origin, sizeof(origin), "the clock start");
+    ROS_WARN("quadrotor_sim: faults scheduled: %s; times from %s", config.faults.describe().c_str(), origin);
+  }
   s.thread_ = std::thread(&QuadrotorSim::loop, &s);
   return sim;
 }
@@ -217,7 +245,9 @@ void QuadrotorSim::commandCallback(const topo_planner::RotorCommandConstPtr& msg
   {
     std::lock_guard<std::mutex> lock(command_mutex_);
     command_ = w;
-    command_answers_ = msg->header.stamp;
+    // An answer to a stamp newer than any odometry published is one from before a backward clock
+    // step: it answers nothing the loop waits for now.
+    if (msg->header.stamp <= newest_published_) command_answers_ = msg->header.stamp;
     command_step_ = current_step_.load();
     have_command_ = true;
     lockstep_suspended_ = false;
@@ -264,6 +294,18 @@ void QuadrotorSim::loop() {
   } else {
     anchor_stamp_ = ros::Time::now();
     if (!truth_->map()) ROS_WARN("quadrotor_sim: no true map yet: collisions are checked once it arrives");
+  }
+  // The fault state at t = 0 (latched for late subscribers), and the faults that start at 0.
+  std_msgs::Bool blackout;
+  blackout.data = false;
+  depth_blackout_pub_.publish(blackout);
+  geometry_msgs::Vector3Stamped offset;
+  offset.header.stamp = stampOf(step_);
+  offset.header.frame_id = config_.world_frame;
+  odom_offset_pub_.publish(offset);
+  if (config_.faults_start_on_speed_mps <= 0.0) {
+    fault_origin_step_ = int64_t(step_);
+    applyFaults(-1.0, 0.0);
   }
   // Wall time of a batch of n steps, and the largest backlog the loop catches up.
   const auto batch_wall = std::chrono::duration<double>(n * dt / config_.realtime_factor);
@@ -344,6 +386,18 @@ void QuadrotorSim::step(const std::shared_ptr<const TruthMap>& map) {
   quad_.step(config_.step_s);
   ++step_;
   current_step_.store(step_);
+  if (!config_.faults.empty()) {
+    if (fault_origin_step_ < 0 && quad_.state().velocity.norm() > config_.faults_start_on_speed_mps) {
+      fault_origin_step_ = int64_t(step_);
+      ROS_INFO("quadrotor_sim: faster than %.2f m/s at t %.3f s: the fault schedule starts",
+               config_.faults_start_on_speed_mps, double(step_) * config_.step_s);
+      applyFaults(-1.0, 0.0);
+    } else if (fault_origin_step_ >= 0) {
+      // Whole steps since the origin: consecutive intervals share their ends exactly.
+      const int64_t k = int64_t(step_) - fault_origin_step_;
+      applyFaults(double(k - 1) * config_.step_s, double(k) * config_.step_s);
+    }
+  }
 
   Quadrotor::State s = quad_.state();
   if (!s.position.allFinite() || !s.velocity.allFinite() || !s.orientation.coeffs().allFinite()) {
@@ -394,6 +448,48 @@ void QuadrotorSim::checkCollision(const std::shared_ptr<const TruthMap>& map) {
   in_contact_ = contact;
 }
 
+void QuadrotorSim::applyFaults(double t0_s, double t1_s) {
+  for (const FaultSchedule::Event& e : config_.faults.eventsIn(t0_s, t1_s)) {
+    switch (e.kind) {
+      case FaultSchedule::Kind::kDepthBlackout: {
+        std_msgs::Bool msg;
+        msg.data = config_.faults.depthBlackout(t1_s);
+        depth_blackout_pub_.publish(msg);
+        break;
+      }
+      case FaultSchedule::Kind::kOdomBlackout:
+        odom_blackout_ = config_.faults.odomBlackout(t1_s);
+        break;
+      case FaultSchedule::Kind::kOdomJump: {
+        odom_offset_ += e.offset_m;
+        geometry_msgs::Vector3Stamped msg;
+        msg.header.stamp = stampOf(step_);
+        msg.header.frame_id = config_.world_frame;
+        msg.vector.x = odom_offset_.x();
+        msg.vector.y = odom_offset_.y();
+        msg.vector.z = odom_offset_.z();
+        odom_offset_pub_.publish(msg);
+        break;
+      }
+      case FaultSchedule::Kind::kClockStep: {
+        // Re-anchor the stamps: step_ keeps its stamp plus the step; the steps after follow it.
+        anchor_stamp_ = stampOf(step_) + ros::Duration(e.step_s);
+        anchor_step_ = step_;
+        std::lock_guard<std::mutex> lock(command_mutex_);
+        command_answers_ = ros::Time();  // answers to the old stamps must not satisfy the lockstep
+        break;
+      }
+    }
+    const std::string line = describe(e);
+    std_msgs::String msg;
+    msg.data = line;
+    fault_event_pub_.publish(msg);
+    ROS_WARN("quadrotor_sim: fault: %s (ROS time now %.3f)", line.c_str(), stampOf(step_).toSec());
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++stats_.fault_events;
+  }
+}
+
 ros::Time QuadrotorSim::publishOdometry() {
   const ros::Time stamp = stampOf(step_);
   const Quadrotor::State& truth = quad_.state();
@@ -408,6 +504,7 @@ ros::Time QuadrotorSim::publishOdometry() {
     for (int a = 0; a < 3; ++a) measured.position[a] += config_.position_noise_m * n01(noise_rng_);
     for (int a = 0; a < 3; ++a) measured.velocity[a] += config_.velocity_noise_mps * n01(noise_rng_);
   }
+  measured.position += odom_offset_;  // odometry jumps (zero without)
   Pending p;
   p.release_step = step_ + delay_steps_;
   stateToOdometry(measured, stamp, config_.world_frame, config_.body_frame, &p.msg);
@@ -416,11 +513,21 @@ ros::Time QuadrotorSim::publishOdometry() {
   ros::Time newest;
   while (!pending_.empty() && pending_.front().release_step <= step_) {
     const nav_msgs::Odometry& msg = pending_.front().msg;
+    if (odom_blackout_) {  // the estimator is silent: nothing is published, not even late
+      pending_.pop_front();
+      std::lock_guard<std::mutex> lock(stats_mutex_);
+      ++stats_.odom_dropped;
+      continue;
+    }
     Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
     const auto& q = msg.pose.pose.orientation;
     T.linear() = Eigen::Quaterniond(q.w, q.x, q.y, q.z).toRotationMatrix();
     T.translation() = Eigen::Vector3d(msg.pose.pose.position.x, msg.pose.pose.position.y, msg.pose.pose.position.z);
     tf_broadcaster_.sendTransform(toTransform(T, msg.header.stamp, config_.world_frame, config_.body_frame));
+    {
+      std::lock_guard<std::mutex> lock(command_mutex_);
+      newest_published_ = msg.header.stamp;
+    }
     odom_pub_.publish(msg);
     newest = msg.header.stamp;
     pending_.pop_front();
@@ -452,11 +559,12 @@ void QuadrotorSim::logStatus(double wall_s, uint64_t steps_in_period) {
   const double factor = steps_in_period * config_.step_s / wall_s;
   ROS_INFO(
       "quadrotor_sim: t %.1f s, real-time factor %.2f (asked %.2f), at (%.2f %.2f %.2f) %.2f m/s, "
-      "%u collisions, %lu commands (%lu refused), %lu lockstep timeouts, %lu failsafes, %lu backlogs dropped",
+      "%u collisions, %lu commands (%lu refused), %lu lockstep timeouts, %lu failsafes, %lu backlogs dropped, "
+      "%lu fault changes, %lu odometry messages dropped",
       stampOf(step_).toSec(), factor, config_.publish_clock ? config_.realtime_factor : 1.0, q.position.x(),
       q.position.y(), q.position.z(), q.velocity.norm(), s.collisions, (unsigned long)s.commands,
       (unsigned long)s.bad_commands, (unsigned long)s.lockstep_timeouts, (unsigned long)s.failsafe_events,
-      (unsigned long)s.lag_events);
+      (unsigned long)s.lag_events, (unsigned long)s.fault_events, (unsigned long)s.odom_dropped);
   if (config_.publish_clock && factor < 0.8 * config_.realtime_factor)
     ROS_WARN(
         "quadrotor_sim: the simulation runs at %.2f x real time, below the %.2f asked (loaded machine or a slow "

@@ -13,13 +13,16 @@
 // Reference. Until the first command: hover where the first odometry put the vehicle (position and
 // heading). After command_timeout_s without a command: hover where the vehicle is at that moment,
 // with the last commanded heading (logged once), until commands resume. A command with NaN/inf is
-// refused (throttled warning) and the last valid one stays. Odometry with NaN/inf or a non-unit
+// refused (throttled warning) and the last valid one stays. The command's age is measured in ROS
+// time, but across a ROS time step (odometry stamps going back, or further apart than
+// max_odom_interval_s) the age it had at the previous odometry is carried over, so a clock step
+// does not fake a timeout (a real flight controller times commands on its own clock). Odometry with NaN/inf or a non-unit
 // quaternion is refused (throttled warning) and not answered.
 //
 // Parameters (private; defaults are the Config defaults below; config/controller.yaml documents them)
 //   position_gain [10 10 12] 1/s^2, velocity_gain [6 6 7] 1/s, attitude_gain [250 250 60] 1/s^2,
 //   rate_gain [30 30 12] 1/s, max_tilt_rad 0.7, min_thrust_ratio 0.2, max_thrust_ratio 2.2,
-//   command_timeout_s 0.5, odom_twist_in_world false, vehicle/* (config/vehicle.yaml: the
+//   command_timeout_s 0.5, max_odom_interval_s 0.25, odom_twist_in_world false, vehicle/* (config/vehicle.yaml: the
 //   controller's model of the airframe).
 
 #include <nav_msgs/Odometry.h>
@@ -42,6 +45,7 @@ class ControllerServer {
     GeometricController::Config gains;  ///< gains and limits
     Quadrotor::Config vehicle;          ///< the controller's model of the airframe (mass, inertia, rotors)
     double command_timeout_s = 0.5;     ///< without a command this long, hover in place [s]
+    double max_odom_interval_s = 0.25;  ///< odometry further apart (or going back) is a time step or a gap [s]
     bool odom_twist_in_world = false;   ///< odometry twist in the world frame (some VIOs) instead of the body frame
 
     bool validate(std::string* why) const;
@@ -63,6 +67,7 @@ class ControllerServer {
   bool holding_ = false;         // the timeout hover is active
   TrackingReference reference_;
   ros::Time command_time_;  // arrival of the latest valid command
+  ros::Time last_odom_stamp_;  // stamp of the previous odometry
   uint64_t commands_ = 0;
   ros::Subscriber odom_sub_, command_sub_;
   ros::Publisher rotor_pub_;

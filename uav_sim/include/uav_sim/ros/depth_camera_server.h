@@ -7,12 +7,22 @@
 // Topics (relative names, resolved in the node's namespace)
 //   Subscribed  odom                         nav_msgs/Odometry        the body pose
 //               map_generator/global_cloud   sensor_msgs/PointCloud2  the true map (latched)
+//               quadrotor_sim/depth_blackout std_msgs/Bool            the simulator's depth blackout
+//                                                                     fault: no image while true
+//               quadrotor_sim/odom_offset    geometry_msgs/Vector3Stamped  the simulator's odometry
+//                                                                     jump offset [m]
 //   Published   camera/depth/image_rect_raw  sensor_msgs/Image        32FC1 [m] (NaN invalid, +inf no
 //                                                                     return) or 16UC1 [mm] (0 = none),
 //                                                                     frame camera_frame
 //               camera/depth/camera_info     sensor_msgs/CameraInfo   same stamp
 //               camera/pose                  geometry_msgs/PoseStamped optical frame in world_frame,
 //                                                                     same stamp as the image
+//
+// Faults (uav_sim/ros/quadrotor_sim.h, uav_sim/fault_schedule.h: the simulator owns the schedule and
+// its clock). During a depth blackout no image, camera_info or pose is published. After an odometry
+// jump the camera still sees the true world: it renders from the odometry pose minus the latest
+// offset, and publishes the odometry's (offset) pose, as a camera on a relocalised VIO would. An
+// odometry blackout needs nothing here: without new odometry no frame is rendered.
 //
 // Threads. Odometry is stored by the main spinner thread; rendering runs on a timer in its own
 // callback queue and thread (the cloud's map build too), so a slow frame never delays odometry. A
@@ -28,7 +38,9 @@
 //   max_odom_age_s 0.5, truth_map_margin_m 1.5, truth_esdf_max_distance_m 2, status_period_s 10;
 //   /sim/* for the true map's resolution and window.
 
+#include <geometry_msgs/Vector3Stamped.h>
 #include <nav_msgs/Odometry.h>
+#include <std_msgs/Bool.h>
 #include <ros/callback_queue.h>
 #include <ros/ros.h>
 
@@ -71,13 +83,18 @@ class DepthCameraServer {
  private:
   DepthCameraServer(const ros::NodeHandle& nh, const Config& config);
   void odomCallback(const nav_msgs::OdometryConstPtr& msg);
+  void blackoutCallback(const std_msgs::BoolConstPtr& msg);
+  void offsetCallback(const geometry_msgs::Vector3StampedConstPtr& msg);
   void renderCallback(const ros::TimerEvent&);
 
   ros::NodeHandle nh_;
   Config config_;
 
-  std::mutex odom_mutex_;  // guards latest_odom_ (written by the main thread, read by the render thread)
+  std::mutex odom_mutex_;  // guards the three below (written by the main thread, read by the render thread)
   nav_msgs::OdometryConstPtr latest_odom_;
+  bool blackout_ = false;                                   // depth blackout fault
+  Eigen::Vector3d odom_offset_ = Eigen::Vector3d::Zero();   // odometry jump fault [m]
+  uint64_t blackout_frames_ = 0;                            // frames not sent for a blackout (render thread)
 
   // Render thread only.
   std::shared_ptr<const TruthMap> camera_map_;  // the map camera_ renders (kept alive with it)
@@ -85,7 +102,7 @@ class DepthCameraServer {
   ros::Time last_rendered_stamp_;
   std::vector<float> depth_;
   std::vector<uint16_t> depth_mm_;
-  uint64_t frames_ = 0, period_frames_ = 0;
+  uint64_t frames_ = 0, period_frames_ = 0, period_blackout_start_ = 0;
   double period_render_ms_ = 0.0, period_max_render_ms_ = 0.0;
   ros::WallTime period_start_wall_;
   ros::Time period_start_;
@@ -93,7 +110,7 @@ class DepthCameraServer {
   ros::CallbackQueue render_queue_;
   std::unique_ptr<ros::AsyncSpinner> render_spinner_;
   std::unique_ptr<TruthMapSubscriber> truth_;
-  ros::Subscriber odom_sub_;
+  ros::Subscriber odom_sub_, blackout_sub_, offset_sub_;
   ros::Timer render_timer_;
   ros::Publisher image_pub_, info_pub_, pose_pub_;
 };

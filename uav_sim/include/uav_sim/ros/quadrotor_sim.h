@@ -15,6 +15,13 @@
 //     quadrotor/collision  topo_planner/Collision  on each new contact
 //     ~ground_truth        nav_msgs/Odometry   the true state (no noise, no delay), when subscribed
 //     /clock               rosgraph_msgs/Clock every step, when publish_clock
+//     ~depth_blackout      std_msgs/Bool (latched) true inside a depth blackout window: the depth
+//                          camera (uav_sim/ros/depth_camera_server.h) publishes no image meanwhile
+//     ~odom_offset         geometry_msgs/Vector3Stamped (latched) the offset the odometry jumps have
+//                          added to the published position so far (zero without jumps) [m]
+//     ~fault_event         std_msgs/String one line per fault change, FaultSchedule's describe():
+//                          "<kind> <start|end|step> t=<simulated s> ...", e.g.
+//                          "odom_blackout end t=14.000 s" (what the flight monitor reads)
 //
 // Time. With publish_clock (the default when /use_sim_time is true) the simulator owns the clock: it
 // starts at clock_start_s, advances by step_s per step and is paced at realtime_factor times wall
@@ -40,6 +47,22 @@
 // speed (the vehicle falls; the crash shows up as a collision). NaN, infinite or negative rotor
 // speeds are refused (throttled warning) and the previous command stays.
 //
+// Faults (uav_sim/fault_schedule.h; faults/* parameters, none by default), at simulated times t =
+// seconds since the clock started (the physics clock, not moved by clock steps), or, with
+// faults/start_on_speed_mps > 0, since the vehicle's true speed first exceeded that (so that a
+// schedule lands at the same point of a flight however long the start-up took):
+//   depth blackout [t0, t1)     ~depth_blackout is true: the depth camera sends no image.
+//   odometry blackout [t0, t1)  no odometry and no tf are published (the physics goes on, ~ground_truth
+//                               too). The controller runs on odometry, so its commands stop as well and
+//                               after command_timeout_s the failsafe above holds the vehicle, as a real
+//                               flight controller without its state estimate would. Delayed odometry
+//                               due inside the window is dropped.
+//   odometry jump at t by d     from t on, d is added to the published position and tf (jumps add
+//                               up: a VIO relocalisation). Velocity and attitude are untouched.
+//   clock step at t by s        /clock and every stamp jump by s seconds (sim time only); the physics
+//                               and the lockstep go on (the lockstep forgets the answers stamped before).
+// Each change is published on ~fault_event and logged (ROS_WARN).
+//
 // Collisions. The body is a sphere of collision_radius_m. A contact is the sphere overlapping an
 // occupied voxel cube (exact: TruthMap::obstacleDistance, an ESDF lower bound as broad phase and
 // point-to-cube distances within the radius as narrow phase) or the ground plane (centre below
@@ -56,7 +79,11 @@
 //   odom_noise/velocity_mps 0, odom_noise/seed 1, odom_delay_s 0, world_frame world, body_frame
 //   base_link, camera_frame camera_optical, camera_extrinsic/translation_m [0 0 0],
 //   camera_extrinsic/quaternion_xyzw [-0.5 0.5 -0.5 0.5], truth_map_margin_m 1.5, map_wait_s 30,
-//   status_period_s 10, vehicle/* (Quadrotor::Config, see config/vehicle.yaml).
+//   status_period_s 10, vehicle/* (Quadrotor::Config, see config/vehicle.yaml),
+//   faults/depth_blackouts_s [] ([t0, t1, ...] windows), faults/odom_blackouts_s [] (windows),
+//   faults/odom_jumps [] ([t, dx, dy, dz, ...] [s, m]), faults/clock_steps [] ([t, step_s, ...] [s]),
+//   faults/start_on_speed_mps 0 (0: fault times from the clock start; > 0: from the first moment the
+//   true speed exceeds this) [m/s].
 // config/quadrotor.yaml documents each. Invalid parameters stop the node with a ROS_ERROR.
 
 #include <nav_msgs/Odometry.h>
@@ -76,6 +103,7 @@
 #include <string>
 #include <thread>
 
+#include "uav_sim/fault_schedule.h"
 #include "uav_sim/geometric_controller.h"
 #include "uav_sim/quadrotor.h"
 #include "uav_sim/ros/truth_map.h"
@@ -115,6 +143,8 @@ class QuadrotorSim {
     double truth_map_margin_m = 1.5;  ///< free margin of the true map's window (uav_sim/truth_map.h) [m]
     double map_wait_s = 30.0;         ///< with publish_clock: hold the clock until the true map arrives (wall) [s]
     double status_period_s = 10.0;    ///< period of the status line (wall) [s]
+    FaultSchedule faults;             ///< faults injected at set simulated times (none by default)
+    double faults_start_on_speed_mps = 0.0;  ///< > 0: fault times count from the first moment faster than this [m/s]
 
     /// Camera looking along body +x (optical z = body x, x = -body y, y = -body z).
     static Eigen::Isometry3d defaultBodyToCamera();
@@ -130,6 +160,8 @@ class QuadrotorSim {
     uint64_t lockstep_timeouts = 0;
     uint64_t failsafe_events = 0;
     uint64_t lag_events = 0;  ///< backlogs dropped
+    uint64_t fault_events = 0;      ///< fault changes applied (starts, ends, jumps, steps)
+    uint64_t odom_dropped = 0;      ///< odometry messages not published (odometry blackout)
   };
 
   /// Starts the simulation loop thread. `nh` resolves the topics, `pnh` is the private handle.
@@ -152,6 +184,8 @@ class QuadrotorSim {
   ros::Time publishOdometry();
   void waitForReply(const ros::Time& odom_stamp);
   void publishClock();
+  /// Applies the faults whose changes fall in (t0_s, t1_s] of simulated time (loop thread).
+  void applyFaults(double t0_s, double t1_s);
   ros::Time stampOf(uint64_t step) const;
   void logStatus(double wall_s, uint64_t steps_in_period);
 
@@ -176,6 +210,9 @@ class QuadrotorSim {
     nav_msgs::Odometry msg;
   };
   std::deque<Pending> pending_;
+  Eigen::Vector3d odom_offset_ = Eigen::Vector3d::Zero();  // odometry jumps so far [m]
+  bool odom_blackout_ = false;                              // inside an odometry blackout
+  int64_t fault_origin_step_ = -1;  // step the fault schedule counts from (-1: not yet)
 
   // Command state, written by the command callback (own queue and spinner thread), read by the loop.
   mutable std::mutex command_mutex_;
@@ -183,6 +220,7 @@ class QuadrotorSim {
   bool have_command_ = false;
   Eigen::Vector4d command_ = Eigen::Vector4d::Zero();
   ros::Time command_answers_;  // odometry stamp the latest command answers
+  ros::Time newest_published_;  // stamp of the newest odometry published
   uint64_t command_step_ = 0;  // step at which it arrived
   bool lockstep_suspended_ = false;
   std::atomic<uint64_t> current_step_{0};
@@ -195,6 +233,7 @@ class QuadrotorSim {
   std::unique_ptr<ros::AsyncSpinner> command_spinner_;
   ros::Subscriber command_sub_;
   ros::Publisher odom_pub_, truth_pub_, collision_pub_, clock_pub_;
+  ros::Publisher depth_blackout_pub_, odom_offset_pub_, fault_event_pub_;
   tf2_ros::TransformBroadcaster tf_broadcaster_;
   tf2_ros::StaticTransformBroadcaster static_broadcaster_;
   std::atomic<bool> stop_{false};
