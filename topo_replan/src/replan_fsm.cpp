@@ -624,8 +624,17 @@ std::optional<ExecTrajectory> ReplanFsm::escapeTrajectoryLocked(double t, const 
     const bool known = !config_.commit_to_known_space || (p - p0).norm() <= config_.known_start_radius_m ||
                        map.query(p).status == QueryStatus::kOk;
     if (!known) {
-      *report = "no escape: the way out crosses unknown space";
-      return std::nullopt;
+      // Look before moving: hold here, turning the camera towards the way out (the trajectory
+      // server turns to a held trajectory's heading target); the next try sees it.
+      ExecTrajectory look;
+      look.start_time_s = t;
+      look.escape = true;
+      look.spline = UniformBspline::straightLine(p0, p0, 6, 3, 0.1);
+      look.brake_start_s = t;
+      look.has_heading_target = true;
+      look.heading_target = walk.back();
+      *report = "escape: the way out crosses unknown space; holding and looking there first";
+      return look;
     }
     if (!map.interpolate(p, &d, nullptr) || d < floor_m) {
       *report = "no escape: the fitted escape comes closer to an obstacle than it starts";

@@ -348,6 +348,42 @@ TEST(ReplanFsm, EscapesFromInsideTheClearanceThenFliesTheMission) {
   EXPECT_EQ(stuck->state(), FsmState::kWaitTarget);
 }
 
+// The way out of an obstacle's clearance crosses unknown space: the FSM holds and looks there
+// first (a held "escape" with a heading target towards it), and escapes once the map knows it.
+TEST(ReplanFsm, LooksBeforeEscapingIntoUnknownSpace) {
+  Corridor seen, unseen;
+  for (Corridor* c : {&seen, &unseen}) c->scene.pillar(3.0, 4.0, 0.5);
+  unseen.scene.fill([](const Eigen::Vector3d& p) { return p.y() > 4.9 && std::hypot(p.x() - 3.0, p.y() - 4.0) > 0.5; },
+                    VoxelState::kUnknown);
+  const EsdfMap& known = seen.scene.finish();
+  const EsdfMap& partly = unseen.scene.finish();
+  const Eigen::Vector3d start(3.0, 4.68, 1.5);  // 0.18 m from the pillar: escape towards +y
+  ReplanFsm::Config config = testConfig();
+  config.escape_clearance_m = 0.8;  // a way out longer than the vehicle's own radius (known_start_radius_m)
+  config.escape_min_clearance_m = 0.7;
+  auto fsm = makeFsm(config);
+  ASSERT_TRUE(fsm->setOdometry(0.0, start, Eigen::Vector3d::Zero()));
+  ASSERT_EQ(fsm->setGoals({{20, 4.5, 1.5}}), GoalStatus::kAccepted);
+  const FsmOutput look = fsm->tick(0.0, partly);
+  ASSERT_TRUE(look.trajectory) << look.message;
+  ASSERT_TRUE(look.event);
+  EXPECT_EQ(look.event->fallback, "escape");
+  EXPECT_NE(look.event->message.find("looking there first"), std::string::npos) << look.event->message;
+  ASSERT_TRUE(look.trajectory->has_heading_target);
+  EXPECT_GT(look.trajectory->heading_target.y(), start.y() + 0.1);
+  EXPECT_LT((look.trajectory->spline.evaluate(look.trajectory->spline.duration()) - start).norm(), 1e-9);
+  // Once it has looked (the map knows the way out), it escapes.
+  double t = 0.05;
+  for (; t < 1.0 && fsm->state() == FsmState::kEmergencyStop; t += 0.05) {
+    fsm->setOdometry(t, start, Eigen::Vector3d::Zero());
+    fsm->tick(t, known);
+  }
+  const std::optional<ExecTrajectory> escape = fsm->current();
+  ASSERT_TRUE(escape);
+  EXPECT_TRUE(escape->escape);
+  EXPECT_GT((escape->spline.evaluate(escape->spline.duration()) - start).norm(), 0.1);
+}
+
 // Seeded high-density forests like the simulation's (a 24 m x 20 m forest between a start and a
 // goal 30 m apart), the map known, the vehicle tracking perfectly: every flight reaches its goal,
 // keeps the safety clearance and never brakes, and few planning calls fail (2 of 79 when written;
