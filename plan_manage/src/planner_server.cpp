@@ -86,6 +86,7 @@ void PlannerServer::odomCallback(const nav_msgs::OdometryConstPtr& msg) {
     velocity = orientation.normalized() * velocity;
   }
   const double t = msg->header.stamp.toSec();
+  if (ros::Time::now().isZero()) return;  // simulated time before the first /clock: no clock yet
   std::string why;
   if (!fsm_->setOdometry(t, Eigen::Vector3d(p.x, p.y, p.z), velocity, ros::Time::now().toSec(), &why))
     ROS_WARN_THROTTLE(2.0, "planner: odometry ignored: %s", why.c_str());
@@ -149,6 +150,7 @@ void PlannerServer::publishHeartbeat(double now) {
 }
 
 void PlannerServer::planTimer(const ros::TimerEvent&) {
+  if (ros::Time::now().isZero()) return;  // simulated time before the first /clock
   const double now = ros::Time::now().toSec();
   feedDepth();
   // The mission of the parameter goals_m, once the inputs allow it.
@@ -165,6 +167,7 @@ void PlannerServer::planTimer(const ros::TimerEvent&) {
 }
 
 void PlannerServer::safetyTimer(const ros::TimerEvent&) {
+  if (ros::Time::now().isZero()) return;  // simulated time before the first /clock
   const double now = ros::Time::now().toSec();
   feedDepth();
   FsmOutput out;

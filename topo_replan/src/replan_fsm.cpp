@@ -353,13 +353,18 @@ void ReplanFsm::replaceCurrentLocked(const ExecTrajectory& next) {
   current_ = next;
 }
 
+const ExecTrajectory* ReplanFsm::flownAtLocked(double t) const {
+  if (!current_) return nullptr;
+  if (previous_ && t < current_->start_time_s && previous_->start_time_s <= t) return &*previous_;
+  return &*current_;
+}
+
 FlatState ReplanFsm::takeoverStateLocked(double t_takeover) const {
   if (!current_) {
     // Not commanded yet: the controller holds the position where it started.
     return FlatState::atRest(odom_position_);
   }
-  const ExecTrajectory& flown =
-      previous_ && t_takeover < current_->start_time_s && previous_->start_time_s <= t_takeover ? *previous_ : *current_;
+  const ExecTrajectory& flown = *flownAtLocked(t_takeover);
   const UniformBspline& s = flown.spline;
   const double tau = std::clamp(t_takeover - flown.start_time_s, 0.0, s.duration());
   FlatState st;
@@ -416,10 +421,12 @@ ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::s
   // Along the current trajectory's path, which was checked when it was published: a stop on a curve
   // stays on the curve instead of leaving it along the tangent. Without one (or from another state),
   // along the velocity.
-  const bool along_path = !from && current_ && t - current_->start_time_s < current_->spline.duration();
+  // (The trajectory flown at t: a plan waiting for its takeover is not flown yet.)
+  const ExecTrajectory* flown = from ? nullptr : flownAtLocked(t);
+  const bool along_path = flown && t - flown->start_time_s < flown->spline.duration();
   std::optional<PathByLength> path;
   if (along_path) {
-    path.emplace(current_->spline, t - current_->start_time_s, 0.01);
+    path.emplace(flown->spline, t - flown->start_time_s, 0.01);
     if (speed >= 0.05) path->setDirection(s0.velocity);
   }
   auto brakeAt = [&](double a) {

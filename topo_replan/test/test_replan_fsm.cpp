@@ -674,6 +674,11 @@ TEST(ReplanFsm, AStopBeforeAPendingTakeoverStartsFromTheTrajectoryFlown) {
   const double tau = t_stop - flown->start_time_s;
   EXPECT_LT((out.trajectory->spline.evaluate(0.0) - flown->spline.evaluate(tau)).norm(), 1e-6);
   EXPECT_LT((out.trajectory->spline.derivative().evaluate(0.0) - flown->spline.derivative().evaluate(tau)).norm(), 1e-6);
+  // And it brakes along the flown path within the limit (along the waiting one's path it started
+  // with a kink: 116 m/s^2 commanded in the odometry-blackout rostest).
+  const UniformBspline acc = out.trajectory->spline.derivative().derivative();
+  for (double s = 0.0; s <= out.trajectory->spline.duration(); s += 0.005)
+    ASSERT_LE(acc.evaluate(s).norm(), 1.1 * config.brake_acc_mps2) << "at " << s << " s";
 }
 
 // A 1 m odometry jump (VIO relocalisation) at cruise speed: the FSM holds at the measured position,

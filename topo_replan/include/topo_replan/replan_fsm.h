@@ -240,6 +240,8 @@ class ReplanFsm {
   /// t_takeover comes before the current one's start.
   FlatState takeoverStateLocked(double t_takeover) const;
   void replaceCurrentLocked(const ExecTrajectory& next);
+  /// The trajectory flown at t: the current one, or the one it replaced before its start; null if none.
+  const ExecTrajectory* flownAtLocked(double t) const;
   double referenceTimeAtLocked(double t) const;
   /// Time to stop from the commanded speed at t at brake_acc_mps2, plus the emergency margin and the
   /// takeover delay: a collision (or the end of a trajectory that ends moving) closer than this
