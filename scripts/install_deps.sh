@@ -10,6 +10,7 @@ PACKAGES=(
   # ROS 1 (Debian)
   ros-base-dev libroscpp-dev rosout rosbash python3-roslaunch python3-rostest librostest-dev
   ros-message-generation ros-message-runtime libmessage-filters-dev
+  python3-geometry-msgs python3-nav-msgs python3-sensor-msgs  # rostest nodes in Python (planner_inputs_test.py)
   libstd-msgs-dev libgeometry-msgs-dev libsensor-msgs-dev libnav-msgs-dev libvisualization-msgs-dev
   libtf2-ros-dev libtf2-eigen-dev libtf2-geometry-msgs-dev libpcl-conversions-dev libcv-bridge-dev
   rviz

@@ -39,6 +39,8 @@ std::unique_ptr<PlannerServer> PlannerServer::create(const ros::NodeHandle& nh, 
   s.roadmap_vis_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("vis/roadmap", 5);
   s.odom_sub_ = pnh.subscribe("odometry", 10, &PlannerServer::odomCallback, &s, ros::TransportHints().tcpNoDelay());
   s.goal_sub_ = pnh.subscribe("goal", 1, &PlannerServer::goalCallback, &s);
+  s.position_cmd_sub_ = pnh.subscribe("position_cmd", 10, &PlannerServer::positionCmdCallback, &s,
+                                      ros::TransportHints().tcpNoDelay());
   s.waypoints_sub_ = pnh.subscribe("waypoints", 1, &PlannerServer::waypointsCallback, &s);
 
   ros::NodeHandle plan_nh(pnh), safety_nh(pnh);
@@ -90,6 +92,32 @@ void PlannerServer::odomCallback(const nav_msgs::OdometryConstPtr& msg) {
   std::string why;
   if (!fsm_->setOdometry(t, Eigen::Vector3d(p.x, p.y, p.z), velocity, ros::Time::now().toSec(), &why))
     ROS_WARN_THROTTLE(2.0, "planner: odometry ignored: %s", why.c_str());
+}
+
+void PlannerServer::positionCmdCallback(const PositionCommandConstPtr& msg) {
+  // The trajectory server's setpoint: whether it follows this planner's trajectory (ReplanFsm).
+  if (!msg->header.frame_id.empty() && msg->header.frame_id != config_.frame_id) {
+    ROS_WARN_THROTTLE(5.0, "planner: position command in frame '%s' ignored (expected '%s')",
+                      msg->header.frame_id.c_str(), config_.frame_id.c_str());
+    return;
+  }
+  ServerSetpoint sp;
+  sp.stamp_s = msg->header.stamp.toSec();
+  sp.position = Eigen::Vector3d(msg->position.x, msg->position.y, msg->position.z);
+  sp.velocity = Eigen::Vector3d(msg->velocity.x, msg->velocity.y, msg->velocity.z);
+  switch (msg->mode) {
+    case PositionCommand::MODE_HOLD_BEFORE_FIRST: sp.mode = ServerSetpoint::Mode::kBeforeFirst; break;
+    case PositionCommand::MODE_TRAJECTORY: sp.mode = ServerSetpoint::Mode::kTrajectory; break;
+    case PositionCommand::MODE_END_STOP:
+    case PositionCommand::MODE_WATCHDOG_STOP: sp.mode = ServerSetpoint::Mode::kStopping; break;
+    case PositionCommand::MODE_HOLD: sp.mode = ServerSetpoint::Mode::kHold; break;
+    default:
+      ROS_WARN_THROTTLE(5.0, "planner: position command with an unknown mode %u ignored", unsigned(msg->mode));
+      return;
+  }
+  sp.own_session = msg->planner_session == session_;
+  sp.trajectory_id = msg->trajectory_id;
+  fsm_->setServerSetpoint(sp);
 }
 
 void PlannerServer::goalCallback(const geometry_msgs::PoseStampedConstPtr& msg) {
@@ -354,6 +382,8 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("fsm/odom_max_age_s", f.odom_max_age_s);
   r.read("fsm/max_tracking_error_m", f.max_tracking_error_m);
   r.read("fsm/time_jump_threshold_s", f.time_jump_threshold_s);
+  r.read("fsm/server_timeout_s", f.server_timeout_s);
+  r.read("fsm/server_grace_s", f.server_grace_s);
   r.read("fsm/waypoint_reached_radius_m", f.waypoint_reached_radius_m);
 
   // Limits: the optimiser's are the vehicle's; the reference flies below them (reference_speed_ratio)

@@ -36,7 +36,7 @@ void TrajServer::bsplineCallback(const BsplineConstPtr& msg) {
   }
   std::lock_guard<std::mutex> lock(mutex_);
   const int64_t sessions = generator_.stats().session_changes;
-  if (!generator_.add(r.planner_session, r.id, r.start_time_s, r.spline, r.heading_target)) {
+  if (!generator_.add(r.planner_session, r.id, r.start_time_s, r.spline, r.heading_target, r.reanchor)) {
     ROS_WARN_THROTTLE(1.0, "traj_server: B-spline %ld of planner session %lu ignored (not newer than the last one)",
                       long(r.id), (unsigned long)r.planner_session);
   } else if (generator_.stats().session_changes > sessions) {
@@ -93,6 +93,13 @@ void TrajServer::logEvents(const SetpointGenerator::Stats& before, const Setpoin
                       "(%ld queued dropped)",
                       after.last_input_age_s, g.heartbeat_timeout_s, after.last_stop_speed_mps, long(sp.trajectory_id),
                       g.stop_acc_mps2, long(after.dropped_on_watchdog - before.dropped_on_watchdog));
+  if (after.discontinuous_refused > before.discontinuous_refused)
+    ROS_WARN_THROTTLE(1.0,
+                      "traj_server: trajectory %ld refused at its take-over: it starts %.2f m from the setpoint "
+                      "(limit %.2f m, or its velocity steps): the planner replans from the published setpoint "
+                      "(%ld refused so far)",
+                      long(after.last_refused_id), after.last_takeover_gap_m, g.max_takeover_gap_m,
+                      long(after.discontinuous_refused));
   if (after.end_stops > before.end_stops)
     ROS_WARN_THROTTLE(1.0,
                       "traj_server: trajectory %ld ended moving at %.2f m/s with no successor: stopping straight on at "
@@ -146,6 +153,8 @@ bool readTrajServerParams(const ros::NodeHandle& nh, TrajServer::Config* config)
   r.read("stop_jerk_mps3", g.stop_jerk_mps3);
   r.read("max_time_step_s", g.max_time_step_s);
   r.read("hold_before_first_trajectory", g.hold_before_first_trajectory);
+  r.read("max_takeover_gap_m", g.max_takeover_gap_m);
+  r.read("max_takeover_velocity_gap_mps", g.max_takeover_velocity_gap_mps);
   std::string why, range;
   if (c.frame_id.empty()) range += "frame_id must not be empty; ";
   if (!(c.rate_hz > 0.0 && c.rate_hz <= 1000.0)) {

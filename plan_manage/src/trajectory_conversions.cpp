@@ -27,6 +27,7 @@ Bspline toMsg(const ExecTrajectory& trajectory, const std::string& frame_id, uin
     msg.heading_target.y = trajectory.heading_target.y();
     msg.heading_target.z = trajectory.heading_target.z();
   }
+  msg.reanchor = trajectory.reanchor;
   return msg;
 }
 
@@ -57,6 +58,7 @@ bool fromMsg(const Bspline& msg, ReceivedTrajectory* out, std::string* why) {
   out->start_time_s = msg.start_time.toSec();
   out->spline = s;
   out->heading_target = heading_target;
+  out->reanchor = msg.reanchor;
   return true;
 }
 
@@ -74,6 +76,14 @@ PositionCommand toMsg(const Setpoint& sp, const ros::Time& stamp, const std::str
   cmd.yaw = sp.yaw;
   cmd.yaw_rate = sp.yaw_rate;
   cmd.trajectory_id = sp.trajectory_id;
+  cmd.planner_session = sp.planner_session;
+  switch (sp.mode) {
+    case Setpoint::Mode::kHoldBeforeFirst: cmd.mode = PositionCommand::MODE_HOLD_BEFORE_FIRST; break;
+    case Setpoint::Mode::kTrajectory: cmd.mode = PositionCommand::MODE_TRAJECTORY; break;
+    case Setpoint::Mode::kEndStop: cmd.mode = PositionCommand::MODE_END_STOP; break;
+    case Setpoint::Mode::kWatchdogStop: cmd.mode = PositionCommand::MODE_WATCHDOG_STOP; break;
+    case Setpoint::Mode::kHold: cmd.mode = PositionCommand::MODE_HOLD; break;
+  }
   return cmd;
 }
 

@@ -154,6 +154,8 @@ bool ReplanFsm::Config::validate(std::string* why) const {
   if (!(waypoint_reached_radius_m >= 0.0) || !std::isfinite(waypoint_reached_radius_m))
     return bad("waypoint_reached_radius_m must be >= 0");
   if (!(max_start_velocity_step_mps >= 0.0)) return bad("max_start_velocity_step_mps must be >= 0");
+  if (!(server_timeout_s > 0.0) || !std::isfinite(server_timeout_s)) return bad("server_timeout_s must be positive");
+  if (!(server_grace_s >= 0.0) || !std::isfinite(server_grace_s)) return bad("server_grace_s must be >= 0");
   return true;
 }
 
@@ -201,6 +203,12 @@ bool ReplanFsm::setOdometry(double t, const Eigen::Vector3d& position, const Eig
   std::lock_guard<std::mutex> lock(mutex_);
   FsmOutput ignored;
   observeClockLocked(arrival_s, &ignored);  // a time jump shifts odom_time_s_ before the order check
+  // Stamped ahead of the clock: another time base (the clock's step has not reached this process
+  // yet) or a skewed sensor clock. Accepting it would make every later odometry look backwards.
+  if (t - arrival_s > config_.odom_max_age_s) {
+    if (why) *why = "stamped " + std::to_string(t - arrival_s) + " s ahead of the clock";
+    return false;
+  }
   if (have_odom_ && t < odom_time_s_) {
     if (why) *why = "stamped " + std::to_string(odom_time_s_ - t) + " s before the last odometry";
     return false;
@@ -213,6 +221,51 @@ bool ReplanFsm::setOdometry(double t, const Eigen::Vector3d& position, const Eig
   // Intermediate goals the vehicle came close to are done (the last one ends the mission in tick()).
   while (next_goal_ + 1 < goals_.size() && (position - goals_[next_goal_]).norm() <= config_.waypoint_reached_radius_m)
     ++next_goal_;
+  return true;
+}
+
+void ReplanFsm::setServerSetpoint(const ServerSetpoint& setpoint) {
+  if (!std::isfinite(setpoint.stamp_s) || !setpoint.position.allFinite() || !setpoint.velocity.allFinite()) return;
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (server_ && setpoint.stamp_s < server_->stamp_s) return;  // out of order
+  server_ = setpoint;
+}
+
+bool ReplanFsm::followServerLocked(double t, const EsdfMap& map, FsmOutput* out) {
+  if (!server_ || !(std::abs(t - server_->stamp_s) <= config_.server_timeout_s)) return false;
+  const ServerSetpoint& sp = *server_;
+  const ExecTrajectory* flown = flownAtLocked(sp.stamp_s);
+  const bool started = flown && sp.stamp_s >= flown->start_time_s + config_.server_grace_s;
+  std::string why;
+  if (sp.mode == ServerSetpoint::Mode::kStopping) {
+    why = "it stops on its own (watchdog or end stop)";
+  } else if (sp.mode == ServerSetpoint::Mode::kTrajectory) {
+    const bool ours = sp.own_session && ((current_ && sp.trajectory_id == current_->id) ||
+                                         (previous_ && sp.trajectory_id == previous_->id));
+    if (!ours && (!current_ || started)) why = "it follows a trajectory this planner did not command";
+  } else if (sp.mode == ServerSetpoint::Mode::kHold && started &&
+             takeoverStateLocked(sp.stamp_s).velocity.norm() > config_.stopped_speed_mps) {
+    why = "it holds while the commanded trajectory moves";
+  }
+  if (why.empty()) {
+    server_reported_ = false;
+    return false;
+  }
+  if (sp.mode != ServerSetpoint::Mode::kHold) {
+    if (!server_reported_) {
+      server_reported_ = true;
+      if (!out->message.empty()) out->message += "; ";
+      out->message += "the trajectory server does not follow the commanded trajectory (" + why +
+                      "): waiting for its hold";
+    }
+    return true;
+  }
+  // At its hold: that is the commanded state now. Hold there (a trajectory at rest, continuous with
+  // the server's setpoint) and replan from it (EMERGENCY_STOP: from rest through the goals left).
+  server_reported_ = false;
+  const FlatState hold = FlatState::atRest(sp.position);
+  emergencyStopLocked(t, map, "the trajectory server holds on its own (" + why + "): holding there", out, &hold,
+                      ReplanStatus::kInvalidInput);
   return true;
 }
 
@@ -297,10 +350,16 @@ void ReplanFsm::observeClockLocked(double now, FsmOutput* out) {
       (*traj)->start_time_s += shift;
       (*traj)->brake_start_s += shift;
     }
-  odom_time_s_ += shift;
-  odom_arrival_s_ += shift;
-  depth_stamp_s_ += shift;
-  depth_arrival_s_ += shift;
+  // Input stamps may already be in the new time base (an input that arrived before this process's
+  // clock stepped): only those nearer the old clock than the new one move.
+  auto shiftOld = [&](double* x) {
+    if (std::abs(*x - last_clock_s_) < std::abs(*x - now)) *x += shift;
+  };
+  shiftOld(&odom_time_s_);
+  odom_arrival_s_ += shift;  // arrivals are read from this clock
+  shiftOld(&depth_stamp_s_);
+  shiftOld(&depth_arrival_s_);
+  if (server_) shiftOld(&server_->stamp_s);
   last_clock_s_ = now;
   ++time_jumps_;
   time_jumped_ = true;
@@ -361,7 +420,11 @@ const ExecTrajectory* ReplanFsm::flownAtLocked(double t) const {
 
 FlatState ReplanFsm::takeoverStateLocked(double t_takeover) const {
   if (!current_) {
-    // Not commanded yet: the controller holds the position where it started.
+    // Not commanded yet: the trajectory server holds (a restarted planner: where its stop ended), or
+    // the controller holds the position where it started.
+    if (server_ && server_->mode == ServerSetpoint::Mode::kHold && std::abs(t_takeover - server_->stamp_s) <=
+                                                                           config_.server_timeout_s + 1.0)
+      return FlatState::atRest(server_->position);
     return FlatState::atRest(odom_position_);
   }
   const ExecTrajectory& flown = *flownAtLocked(t_takeover);
@@ -811,6 +874,7 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
   FsmOutput out;
   if (!std::isfinite(t)) return out;
   observeClockLocked(t, &out);
+  if (state_ != FsmState::kInit && followServerLocked(t, map, &out)) return out;
   // Nothing is planned on stale inputs (checkSafety() brakes a moving vehicle); goals wait.
   std::string stale;
   if (state_ != FsmState::kInit && !inputsFreshLocked(t, &stale)) {
@@ -935,7 +999,8 @@ FsmOutput ReplanFsm::checkSafety(double t, const EsdfMap& map) {
   FsmOutput out;
   if (!std::isfinite(t)) return out;
   observeClockLocked(t, &out);
-  if (!current_ || state_ == FsmState::kInit) return out;
+  if (state_ == FsmState::kInit || followServerLocked(t, map, &out)) return out;
+  if (!current_) return out;
   const bool active = t < current_->endTime();
   const double commanded_speed = active ? takeoverStateLocked(t).velocity.norm() : 0.0;
   // Stale inputs: a moving vehicle brakes to a hover (a braking trajectory already does).
@@ -957,6 +1022,7 @@ FsmOutput ReplanFsm::checkSafety(double t, const EsdfMap& map) {
     std::snprintf(text, sizeof(text), "odometry %.2f m from the commanded position (limit %.2f m): holding at the "
                   "measured position", tracking_error, config_.max_tracking_error_m);
     emergencyStopLocked(t, map, text, &out, &from, ReplanStatus::kInvalidInput);
+    current_->reanchor = out.trajectory->reanchor = true;  // the step to the measured position is deliberate
     out.odometry_jumped = true;
     return out;
   }

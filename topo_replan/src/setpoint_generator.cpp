@@ -50,11 +50,14 @@ bool SetpointGenerator::Config::validate(std::string* why) const {
   if (!finitePositive(stop_jerk_mps3)) return bad("stop_jerk_mps3 must be positive");
   if (!std::isfinite(max_time_step_s) || max_time_step_s <= 2.0 * nominal_period_s)
     return bad("max_time_step_s must be longer than two sampling periods");
+  if (!(max_takeover_gap_m > 0.0) || !std::isfinite(max_takeover_gap_m)) return bad("max_takeover_gap_m must be positive");
+  if (!(max_takeover_velocity_gap_mps > 0.0) || !std::isfinite(max_takeover_velocity_gap_mps))
+    return bad("max_takeover_velocity_gap_mps must be positive");
   return true;
 }
 
 bool SetpointGenerator::add(uint64_t session, int64_t id, double start_time_s, const UniformBspline& spline,
-                            const std::optional<Eigen::Vector3d>& heading_target) {
+                            const std::optional<Eigen::Vector3d>& heading_target, bool reanchor) {
   const bool valid = std::isfinite(start_time_s) && spline.isValid() && spline.degree() >= 3 &&
                      (!heading_target || heading_target->allFinite());
   const bool new_session = have_last_ && session != last_session_;
@@ -71,6 +74,7 @@ bool SetpointGenerator::add(uint64_t session, int64_t id, double start_time_s, c
   e.acc = e.vel.derivative();
   e.jerk = e.acc.derivative();
   e.heading_target = heading_target;
+  e.reanchor = reanchor;
   if (new_session) {
     // The old planner's queued trajectories will not be followed up by it: drop them.
     ++stats_.session_changes;
@@ -307,10 +311,24 @@ bool SetpointGenerator::sample(double t, Setpoint* out) {
     input_pending_ = false;
   }
 
-  // The newest queued trajectory whose start has come takes over (also from a stop or a hold).
+  // The newest queued trajectory whose start has come takes over (also from a stop or a hold), if it
+  // goes on from the setpoint it replaces: the last one moved on by dt at its velocity.
+  const Eigen::Vector3d expected_position = last_state_.position + dt * last_state_.velocity;
   while (!queue_.empty() && queue_.front().start <= t) {
-    current_ = std::move(queue_.front());
+    Entry next = std::move(queue_.front());
     queue_.pop_front();
+    if (have_setpoint_ && !next.reanchor) {
+      const FlatState s = trajectoryState(next, std::min(t - next.start, next.pos.duration()));
+      const double gap = (s.position - expected_position).norm();
+      const double velocity_gap = (s.velocity - last_state_.velocity).norm();
+      if (!(gap <= config_.max_takeover_gap_m) || !(velocity_gap <= config_.max_takeover_velocity_gap_mps)) {
+        ++stats_.discontinuous_refused;
+        stats_.last_takeover_gap_m = gap;
+        stats_.last_refused_id = next.id;
+        continue;
+      }
+    }
+    current_ = std::move(next);
     active_ = true;
     mode_ = Setpoint::Mode::kTrajectory;
   }
@@ -369,7 +387,10 @@ bool SetpointGenerator::sample(double t, Setpoint* out) {
   }
   sp.mode = mode_;
   sp.trajectory_id = current_.id;
+  sp.planner_session = current_.session;
   sp.yaw = updateYaw(dt, sp.state.position, ahead, &sp.yaw_rate);
+  last_state_ = sp.state;
+  have_setpoint_ = true;
   *out = sp;
   return true;
 }

@@ -13,6 +13,7 @@
 
 #include "plan_env/synthetic_scene.h"
 #include "topo_replan/replan_fsm.h"
+#include "topo_replan/setpoint_generator.h"
 
 namespace topo_planner {
 namespace {
@@ -759,6 +760,150 @@ TEST(ReplanFsm, RebuiltMissionsKeepOnlyTheGoalsNotReached) {
   const PolynomialTrajectory ref = fsm->reference();
   for (double t = 0.0; t <= ref.duration(); t += 0.05) EXPECT_GT((ref.position(t) - first).norm(), 1.0) << t;
   EXPECT_LT((ref.position(ref.duration()) - last).norm(), 1e-6);
+}
+
+// --- The trajectory server in the loop ---
+
+struct ServerLoopLog {
+  bool goal_reached = false;
+  double max_position_step = 0.0;  // largest setpoint step between samples beyond |v| dt [m]
+  SetpointGenerator::Stats server;
+  std::vector<std::string> messages;
+};
+
+// The FSM and the trajectory server's core (SetpointGenerator) in one loop, as planner_node and
+// traj_server_node run them: the server samples at 100 Hz and the vehicle is its setpoint (odometry =
+// setpoint + odom_offset); the planner runs at 20 Hz (checkSafety, tick, heartbeat) except in
+// [stall_from, stall_to) (a stalled or dead process). With `restart`, a new FSM (a new planner
+// session) takes over at stall_to and is given the goal again. With `tell_fsm`, the FSM gets the
+// server's setpoint (PositionCommand) before each call.
+ServerLoopLog flyWithServer(const EsdfMap& map, const Eigen::Vector3d& start, const Eigen::Vector3d& goal,
+                            double stall_from, double stall_to, bool restart, bool tell_fsm,
+                            const Eigen::Vector3d& odom_offset, double max_t) {
+  ServerLoopLog log;
+  std::unique_ptr<ReplanFsm> fsm = makeFsm();
+  uint64_t session = 1;
+  SetpointGenerator gen{SetpointGenerator::Config()};
+  Setpoint sp;
+  bool have_sp = false;
+  double sp_t = 0.0;
+  Eigen::Vector3d position = start, velocity = Eigen::Vector3d::Zero();
+  EXPECT_TRUE(fsm->setOdometry(0.0, position + odom_offset, velocity));
+  fsm->setDepthFused(0.0);
+  EXPECT_EQ(fsm->setGoals({goal}), GoalStatus::kAccepted);
+  bool restarted = false;
+  for (int k = 0; k * 0.01 <= max_t && !log.goal_reached; ++k) {
+    const double t = k * 0.01;
+    const bool stalled = t >= stall_from && t < stall_to;
+    if (restart && !restarted && t >= stall_to) {
+      restarted = true;
+      fsm = makeFsm();
+      session = 2;
+      EXPECT_TRUE(fsm->setOdometry(t, position + odom_offset, velocity));
+      fsm->setDepthFused(t);
+      EXPECT_EQ(fsm->setGoals({goal}), GoalStatus::kAccepted);
+    }
+    if (!stalled && k % 5 == 0) {
+      fsm->setOdometry(t, position + odom_offset, velocity);
+      fsm->setDepthFused(t);
+      if (tell_fsm && have_sp) {
+        ServerSetpoint s;
+        s.stamp_s = sp_t;
+        s.position = sp.state.position;
+        s.velocity = sp.state.velocity;
+        s.mode = sp.mode == Setpoint::Mode::kTrajectory ? ServerSetpoint::Mode::kTrajectory
+                 : sp.mode == Setpoint::Mode::kHold     ? ServerSetpoint::Mode::kHold
+                 : sp.mode == Setpoint::Mode::kHoldBeforeFirst ? ServerSetpoint::Mode::kBeforeFirst
+                                                               : ServerSetpoint::Mode::kStopping;
+        s.own_session = sp.planner_session == session;
+        s.trajectory_id = sp.trajectory_id;
+        fsm->setServerSetpoint(s);
+      }
+      for (const FsmOutput& out : {fsm->checkSafety(t, map), fsm->tick(t, map)}) {
+        if (!out.message.empty()) log.messages.push_back(out.message);
+        if (out.trajectory) {
+          const ExecTrajectory& e = *out.trajectory;
+          gen.add(session, e.id, e.start_time_s, e.spline,
+                  e.has_heading_target ? std::optional<Eigen::Vector3d>(e.heading_target) : std::nullopt, e.reanchor);
+        }
+        log.goal_reached = log.goal_reached || out.goal_reached;
+      }
+      gen.noteHeartbeat(t);
+    }
+    Setpoint next;
+    if (!gen.sample(t, &next)) continue;
+    if (have_sp) {
+      const double v = std::max(next.state.velocity.norm(), sp.state.velocity.norm());
+      log.max_position_step = std::max(log.max_position_step, (next.state.position - sp.state.position).norm() - v * 0.01);
+    }
+    sp = next, sp_t = t, have_sp = true;
+    position = sp.state.position;
+    velocity = sp.state.velocity;
+  }
+  log.server = gen.stats();
+  return log;
+}
+
+// The planner stalls for 0.8 s mid-flight: the server's watchdog stops the vehicle on its own. Told
+// the server's setpoint, the FSM publishes nothing until the server holds, then plans from the hold:
+// no refused take-over, no setpoint step, the goal is reached. Not told (the counterpart), the FSM
+// plans from its own trajectory, which the vehicle left: the server refuses those plans.
+TEST(ReplanFsm, PlansFromTheServersHoldAfterAWatchdogStop) {
+  Corridor c;
+  const EsdfMap& map = c.scene.finish();
+  const ServerLoopLog log =
+      flyWithServer(map, {1, 4, 1.5}, {22, 4, 1.5}, 3.0, 3.8, false, true, Eigen::Vector3d::Zero(), 40.0);
+  EXPECT_TRUE(log.goal_reached);
+  EXPECT_EQ(log.server.watchdog_stops, 1);
+  EXPECT_EQ(log.server.discontinuous_refused, 0);
+  EXPECT_LT(log.max_position_step, 1e-3);
+  bool waited = false;
+  for (const std::string& m : log.messages) waited = waited || m.find("waiting for its hold") != std::string::npos;
+  EXPECT_TRUE(waited);
+
+  const ServerLoopLog blind =
+      flyWithServer(map, {1, 4, 1.5}, {22, 4, 1.5}, 3.0, 3.8, false, false, Eigen::Vector3d::Zero(), 8.0);
+  EXPECT_EQ(blind.server.watchdog_stops, 1);
+  EXPECT_GT(blind.server.discontinuous_refused, 0);
+}
+
+// The planner dies mid-flight and a new one starts 1.5 s later while the odometry reads 0.2 m off the
+// setpoint (tracking error): the new FSM starts from the server's hold, not from the odometry, so its
+// first trajectory takes over without a step. The counterpart (not told) is refused (until the FSM
+// finds the odometry far from its own trajectory and re-anchors on it).
+TEST(ReplanFsm, ARestartedPlannerStartsFromTheServersHold) {
+  Corridor c;
+  const EsdfMap& map = c.scene.finish();
+  const Eigen::Vector3d offset(0.0, 0.2, 0.0);
+  const ServerLoopLog log = flyWithServer(map, {1, 4, 1.5}, {22, 4, 1.5}, 3.0, 4.5, true, true, offset, 40.0);
+  EXPECT_TRUE(log.goal_reached);
+  EXPECT_EQ(log.server.watchdog_stops, 1);
+  EXPECT_EQ(log.server.session_changes, 1);
+  EXPECT_EQ(log.server.discontinuous_refused, 0);
+  EXPECT_LT(log.max_position_step, 1e-3);
+
+  const ServerLoopLog blind = flyWithServer(map, {1, 4, 1.5}, {22, 4, 1.5}, 3.0, 4.5, true, false, offset, 8.0);
+  EXPECT_GT(blind.server.discontinuous_refused, 0);
+}
+
+// Odometry stamped ahead of the clock (another time base, or a skewed sensor clock) is refused, and
+// does not make the next, correctly stamped, odometry look backwards.
+TEST(ReplanFsm, RefusesOdometryStampedAheadOfTheClock) {
+  auto fsm = makeFsm();
+  std::string why;
+  ASSERT_TRUE(fsm->setOdometry(1.0, {1, 1, 1}, Eigen::Vector3d::Zero(), 1.0, &why));
+  EXPECT_FALSE(fsm->setOdometry(3.6, {1, 1, 1}, Eigen::Vector3d::Zero(), 1.01, &why));
+  EXPECT_NE(why.find("ahead of the clock"), std::string::npos) << why;
+  EXPECT_TRUE(fsm->setOdometry(1.02, {1, 1, 1}, Eigen::Vector3d::Zero(), 1.02, &why)) << why;
+  // The clock steps forward by 2.6 s after an odometry of the new time base was refused: the stored
+  // stamp (old base) moves with the clock, so the next odometry (new base) is fresh and in order.
+  Corridor c;
+  const EsdfMap& map = c.scene.finish();
+  fsm->checkSafety(3.63, map);
+  EXPECT_EQ(fsm->timeJumps(), 1);
+  EXPECT_TRUE(fsm->setOdometry(3.635, {1, 1, 1}, Eigen::Vector3d::Zero(), 3.64, &why)) << why;
+  EXPECT_TRUE(fsm->inputHealth(3.64).ok || fsm->inputHealth(3.64).why.find("depth") != std::string::npos)
+      << fsm->inputHealth(3.64).why;
 }
 
 TEST(ReplanFsm, InvalidConfigIsRefused) {

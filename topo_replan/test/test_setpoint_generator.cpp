@@ -104,7 +104,9 @@ TEST(SetpointGenerator, RefusesStaleOrInvalidTrajectories) {
 }
 
 TEST(SetpointGenerator, TakesOverAtTheStartTimeAndHoldsTheEnd) {
-  SetpointGenerator gen{SetpointGenerator::Config()};
+  SetpointGenerator::Config config;
+  config.max_takeover_velocity_gap_mps = 1e9;  // a turn on the spot (continuity: section 5)
+  SetpointGenerator gen(config);
   const UniformBspline a = line({0, 0, 1}, {5, 0, 1});
   ASSERT_TRUE(gen.add(0, 0, 0.0, a));
   // The second starts at t = 2 from where the first is then, heading to y = 3.
@@ -178,7 +180,9 @@ TEST(SetpointGenerator, ConfigValidation) {
 // --- 1. Ordering that survives a planner restart ---
 
 TEST(SetpointGenerator, AcceptsARestartedPlannersTrajectories) {
-  SetpointGenerator gen{SetpointGenerator::Config()};
+  SetpointGenerator::Config config;
+  config.max_takeover_gap_m = config.max_takeover_velocity_gap_mps = 1e9;  // ordering only (continuity: section 5)
+  SetpointGenerator gen(config);
   const UniformBspline a = line({0, 0, 1}, {5, 0, 1});
   ASSERT_TRUE(gen.add(7, 41, 0.0, a));
   EXPECT_FALSE(gen.add(7, 40, 0.5, a));  // older id, same session: refused as before
@@ -436,6 +440,100 @@ TEST(SetpointGenerator, WatchdogCountsElapsedTimeAcrossATimeJump) {
     }
     EXPECT_EQ(k_stop, 99 + 51) << "jump " << jump;  // last heartbeat at sample 99
   }
+}
+
+// A stall of the sampling shorter than max_time_step_s (a loaded computer) is not a time jump: the
+// setpoint goes on in time, as the planner's clock does (the planner only shifts beyond its own
+// threshold, equal by default), so the planner's next trajectory still joins it.
+TEST(SetpointGenerator, AStallIsFlownOnInTimeNotShifted) {
+  SetpointGenerator gen{SetpointGenerator::Config()};
+  const UniformBspline a = constantVelocity({0, 0, 1}, {3, 0, 0}, 10.0);
+  ASSERT_TRUE(gen.add(1, 0, 0.0, a));
+  Setpoint sp;
+  for (int k = 0; k <= 100; ++k) {
+    gen.noteHeartbeat(k * kDt);
+    ASSERT_TRUE(gen.sample(k * kDt, &sp));
+  }
+  const double t = 1.0 + 0.4;  // 0.4 s without a sample
+  gen.noteHeartbeat(t);
+  ASSERT_TRUE(gen.sample(t, &sp));
+  EXPECT_EQ(gen.stats().forward_time_jumps, 0);
+  EXPECT_LT((sp.state.position - a.evaluate(t)).norm(), 1e-9);
+  // The planner's trajectory from its clock's state joins.
+  ASSERT_TRUE(gen.add(1, 1, t + 0.1, constantVelocity(a.evaluate(t + 0.1), {3, 0, 0}, 2.0)));
+  for (int k = 1; k <= 20; ++k) {
+    gen.noteHeartbeat(t + k * kDt);
+    ASSERT_TRUE(gen.sample(t + k * kDt, &sp));
+  }
+  EXPECT_EQ(sp.trajectory_id, 1);
+  EXPECT_EQ(gen.stats().discontinuous_refused, 0);
+}
+
+// --- 5. Continuity at the take-over ---
+
+// A trajectory that does not start from the setpoint it replaces (a planner that missed a watchdog
+// stop, or planned from odometry) is refused at its take-over: the setpoint goes on along the current
+// one. A re-anchoring trajectory (odometry jump) and a continuous one take over.
+TEST(SetpointGenerator, RefusesATakeoverThatWouldStepTheSetpoint) {
+  SetpointGenerator gen{SetpointGenerator::Config()};
+  const UniformBspline a = constantVelocity({0, 0, 1}, {3, 0, 0}, 10.0);
+  ASSERT_TRUE(gen.add(1, 0, 0.0, a));
+  std::vector<Setpoint> sps;
+  Setpoint sp;
+  double t = 0.0;
+  auto run = [&](int n) {
+    for (int k = 0; k < n; ++k, t += kDt) {
+      gen.noteHeartbeat(t);
+      ASSERT_TRUE(gen.sample(t, &sp));
+      sps.push_back(sp);
+    }
+  };
+  run(100);
+  // 0.3 m beside the setpoint: refused.
+  ASSERT_TRUE(gen.add(1, 1, 1.05, constantVelocity(a.evaluate(1.05) + Eigen::Vector3d(0, 0.3, 0), {3, 0, 0}, 2.0)));
+  run(20);
+  EXPECT_EQ(sp.trajectory_id, 0);
+  EXPECT_EQ(gen.stats().discontinuous_refused, 1);
+  EXPECT_EQ(gen.stats().last_refused_id, 1);
+  EXPECT_NEAR(gen.stats().last_takeover_gap_m, 0.3, 0.01);
+  // Right position, velocity stepping by 1 m/s: refused too.
+  ASSERT_TRUE(gen.add(1, 2, 1.35, constantVelocity(a.evaluate(1.35), {2, 0, 0}, 2.0)));
+  run(20);
+  EXPECT_EQ(sp.trajectory_id, 0);
+  EXPECT_EQ(gen.stats().discontinuous_refused, 2);
+  expectSmooth(sps, 2.5, 0.0);
+  // Continuous: taken over.
+  ASSERT_TRUE(gen.add(1, 3, 1.45, constantVelocity(a.evaluate(1.45), {3, 0, 0}, 2.0)));
+  run(10);
+  EXPECT_EQ(sp.trajectory_id, 3);
+  expectSmooth(sps, 2.5, 0.0);
+  // A re-anchoring one 0.5 m away: taken over (the step is the odometry's).
+  const Eigen::Vector3d measured = sp.state.position + Eigen::Vector3d(0, 0.5, 0);
+  ASSERT_TRUE(gen.add(1, 4, t, line(measured, measured), std::nullopt, /*reanchor=*/true));
+  run(2);
+  EXPECT_EQ(sp.trajectory_id, 4);
+  EXPECT_LT((sp.state.position - measured).norm(), 1e-9);
+  EXPECT_EQ(gen.stats().discontinuous_refused, 2);
+}
+
+// After a watchdog stop, the silent planner's trajectory from where it believes the vehicle is (on
+// its own trajectory, not on the stop) is refused; one from the server's hold takes over.
+TEST(SetpointGenerator, AfterAWatchdogStopOnlyATrajectoryFromTheHoldTakesOver) {
+  SetpointGenerator gen{SetpointGenerator::Config()};
+  const UniformBspline a = constantVelocity({0, 0, 1}, {3, 0, 0}, 10.0);
+  ASSERT_TRUE(gen.add(1, 0, 0.0, a));
+  Flight f = fly(&gen, 0.0, 3.0, 0.5);
+  ASSERT_EQ(f.sps.back().mode, Mode::kHold);
+  ASSERT_TRUE(gen.add(1, 1, 3.1, constantVelocity(a.evaluate(3.1), {3, 0, 0}, 2.0)));
+  Flight g = fly(&gen, 3.01, 3.3, 100.0);
+  EXPECT_EQ(g.sps.back().mode, Mode::kHold);
+  EXPECT_EQ(gen.stats().discontinuous_refused, 1);
+  const Eigen::Vector3d p = g.sps.back().state.position;
+  ASSERT_TRUE(gen.add(1, 2, 3.4, line(p, p + Eigen::Vector3d(0, 4, 0))));
+  g = fly(&gen, 3.31, 4.0, 100.0);
+  EXPECT_EQ(g.sps.back().mode, Mode::kTrajectory);
+  EXPECT_EQ(g.sps.back().trajectory_id, 2);
+  expectSmooth(g.sps, 2.5, 0.0);
 }
 
 // --- 4. Heading target ---

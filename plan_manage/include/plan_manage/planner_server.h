@@ -21,6 +21,10 @@
 //                                odom_twist_in_world)
 //               ~goal            geometry_msgs/PoseStamped (rviz 2D Nav Goal; placed at goal_height_m)
 //               ~waypoints       nav_msgs/Path (3-D goals, flown in order)
+//               ~position_cmd    topo_planner/PositionCommand, the trajectory server's setpoint: when
+//                                the server stops or holds on its own (watchdog, a refused
+//                                trajectory), the FSM plans from its hold (ReplanFsm, "The trajectory
+//                                server")
 //               ~mapping/...     the mapping topics (plan_manage/mapping_server.h)
 //   Published   ~bspline         topo_planner/Bspline, every trajectory the FSM returns (with this
 //                                process's random planner_session, so a restarted planner is accepted)
@@ -44,6 +48,7 @@
 #include <vector>
 
 #include "plan_manage/mapping_server.h"
+#include "topo_planner/PositionCommand.h"
 #include "topo_replan/replan_fsm.h"
 
 namespace topo_planner {
@@ -71,6 +76,7 @@ class PlannerServer {
   PlannerServer(const ros::NodeHandle& nh, const Config& config);
 
   void odomCallback(const nav_msgs::OdometryConstPtr& msg);
+  void positionCmdCallback(const PositionCommandConstPtr& msg);
   void goalCallback(const geometry_msgs::PoseStampedConstPtr& msg);
   void waypointsCallback(const nav_msgs::PathConstPtr& msg);
   void submitGoals(const std::vector<Eigen::Vector3d>& goals, const char* source);
@@ -91,7 +97,7 @@ class PlannerServer {
   std::unique_ptr<MappingServer> mapping_;
   std::unique_ptr<ros::AsyncSpinner> mapping_spinner_, planning_spinner_, safety_spinner_;
 
-  ros::Subscriber odom_sub_, goal_sub_, waypoints_sub_;
+  ros::Subscriber odom_sub_, goal_sub_, waypoints_sub_, position_cmd_sub_;
   uint64_t session_ = 0;  // random per process: trajectory ordering survives a restart
   ros::Publisher heartbeat_pub_;
   int time_jumps_logged_ = 0;  // safety thread only

@@ -28,6 +28,7 @@ struct ReceivedTrajectory {
   double start_time_s = 0.0;  ///< [s, ROS time]
   UniformBspline spline;
   std::optional<Eigen::Vector3d> heading_target;  ///< set when has_heading_target [m, world]
+  bool reanchor = false;                          ///< deliberately starts away from the setpoint
 };
 /// The content of a message; false (with a reason) for an invalid one (too few or non-finite
 /// control points, bad degree or knot span, a non-finite heading target).

@@ -47,6 +47,16 @@
 // refused. Odometry farther than max_tracking_error_m from the commanded position at its stamp (a
 // VIO jump or relocalisation) makes the FSM hold at the measured position and replan from there.
 //
+// The trajectory server. The commanded state is the FSM's trajectory as long as the trajectory server
+// follows it. When the server's published setpoint (setServerSetpoint, fresh within
+// server_timeout_s) shows that it does not (it stopped on its own: watchdog, a trajectory that ended
+// moving; it refused a trajectory that was not continuous; it holds while the FSM's trajectory
+// moves; or a restarted planner finds it on another session's trajectory), the FSM publishes
+// nothing and skips its own checks until the server holds, then takes the hold as its commanded
+// state (a trajectory at rest there) and replans from it. Before its first trajectory the FSM
+// starts from the server's hold rather than from odometry. Without server setpoints, the FSM's
+// trajectory is the commanded state.
+//
 // Time. A clock that steps backwards or forwards by more than time_jump_threshold_s between two
 // calls (setOdometry's arrival time, tick, checkSafety) is a time jump: every stored time (the
 // trajectory's start, the inputs' stamps) is shifted by the step so the commanded motion goes on
@@ -104,6 +114,9 @@ struct ExecTrajectory {
   /// at the edge of the known space): a point ahead on the planned (optimistic) path.
   bool has_heading_target = false;
   Eigen::Vector3d heading_target = Eigen::Vector3d::Zero();
+  /// Deliberately starts away from the commanded state (the hold at the measured position after an
+  /// odometry jump): the trajectory server accepts the step.
+  bool reanchor = false;
   double endTime() const { return start_time_s + spline.duration(); }
   /// Braking or escape: checked when made, ends at rest, not on the reference, not replanned.
   bool manoeuvre() const { return braking || escape; }
@@ -122,6 +135,17 @@ struct FsmEvent {
   ReplanStats stats;
 };
 const char* toString(FsmEvent::Trigger trigger);
+
+/// The setpoint the trajectory server commands (its published position command).
+struct ServerSetpoint {
+  enum class Mode { kBeforeFirst, kTrajectory, kStopping, kHold };
+  double stamp_s = 0.0;  ///< [s, caller's clock]
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();
+  Eigen::Vector3d velocity = Eigen::Vector3d::Zero();
+  Mode mode = Mode::kTrajectory;  ///< kStopping: a stop of its own (watchdog, or a trajectory that ended moving)
+  bool own_session = false;       ///< the trajectory it follows (or followed) is of this planner session
+  int64_t trajectory_id = -1;     ///< ... and has this id
+};
 
 /// Freshness of the inputs at a time, for the heartbeat, the diagnostics and the log.
 struct InputHealth {
@@ -192,6 +216,10 @@ class ReplanFsm {
     /// A plan whose start velocity differs from the commanded one by more than this (the replanner
     /// could not restore it after time reallocation) is not published: setpoints never step [m/s].
     double max_start_velocity_step_mps = 0.1;
+    /// The trajectory server's setpoint counts while this fresh (its stamp vs the clock) [s].
+    double server_timeout_s = 0.25;
+    /// The server is on a trajectory of this planner's that has started this long (message latency) [s].
+    double server_grace_s = 0.15;
 
     bool validate(std::string* why) const;
   };
@@ -209,6 +237,8 @@ class ReplanFsm {
   void setDepthFused(double stamp_s, double arrival_s = NAN);
   /// Freshness of the inputs at clock t.
   InputHealth inputHealth(double t) const;
+  /// The trajectory server's latest setpoint (see the class comment). Non-finite values are ignored.
+  void setServerSetpoint(const ServerSetpoint& setpoint);
   /// A new mission (replaces the current one): the goals are checked against the map and the
   /// reference is built at the next tick(); the status of that check is returned by tick() in
   /// FsmOutput::message and kept in lastGoalStatus(). Immediate refusal for no odometry or bad input.
@@ -265,6 +295,9 @@ class ReplanFsm {
   /// Clock bookkeeping of every entry point: detects a time jump and shifts the stored times.
   void observeClockLocked(double now, FsmOutput* out);
   bool inputsFreshLocked(double now, std::string* why) const;
+  /// The trajectory server does not follow this FSM's trajectory (see the class comment): true when
+  /// the caller must not publish or check; at the server's hold, takes it as the commanded state.
+  bool followServerLocked(double t, const EsdfMap& map, FsmOutput* out);
   /// Brakes now for `reason` (stale input, odometry jump): publishes the stop, EMERGENCY_STOP.
   void emergencyStopLocked(double t, const EsdfMap& map, const std::string& reason, FsmOutput* out,
                            const FlatState* from, ReplanStatus status);
@@ -306,6 +339,8 @@ class ReplanFsm {
   std::optional<ExecTrajectory> current_;
   std::optional<ExecTrajectory> previous_;  // the one current_ replaced: flown until current_ starts
   int64_t next_id_ = 0;
+  std::optional<ServerSetpoint> server_;  // the trajectory server's latest setpoint
+  bool server_reported_ = false;          // the divergence message was given (once per episode)
   bool collision_ahead_ = false;  // set by checkSafety, consumed by tick
   int consecutive_failures_ = 0;
   double takeover_delay_s_;       // the adaptive takeover delay (tick() only writes it, under the mutex)

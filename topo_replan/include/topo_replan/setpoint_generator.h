@@ -7,6 +7,14 @@
 //   of the current one at that time, so the setpoints are continuous).
 // - Ordering: trajectory ids increase within one planner session; a trajectory of another session
 //   (a restarted planner, whose ids start again at 0) is accepted whatever its id.
+// - Continuity: a trajectory whose state at its take-over differs from the setpoint it would replace
+//   (the last setpoint moved on by the time since) by more than max_takeover_gap_m in position or
+//   max_takeover_velocity_gap_mps in velocity is refused at its take-over (counted, the setpoint goes
+//   on as before): the planner planned from a state the vehicle is not commanded to be in (it missed
+//   a watchdog stop, or a restarted planner started from odometry). The planner learns the commanded
+//   setpoint from the published position command (mode, trajectory id, planner session) and plans
+//   again from it. A re-anchoring trajectory (the planner holds at the measured position after an
+//   odometry jump) is exempt: its step is deliberate.
 // - Watchdog: when neither a planner heartbeat (noteHeartbeat) nor a trajectory (add) came for
 //   heartbeat_timeout_s while the setpoint moves faster than moving_speed_mps, the vehicle stops
 //   smoothly along the current trajectory's path (the path the planner checked), then holds; queued
@@ -60,6 +68,7 @@ struct Setpoint {
   double yaw = 0.0;       ///< [rad]
   double yaw_rate = 0.0;  ///< [rad/s]
   int64_t trajectory_id = -1;  ///< the trajectory it comes from (the last one when stopping or holding)
+  uint64_t planner_session = 0;  ///< that trajectory's planner session
   Mode mode = Mode::kTrajectory;
   bool moving() const { return mode == Mode::kTrajectory || mode == Mode::kEndStop || mode == Mode::kWatchdogStop; }
 };
@@ -76,9 +85,13 @@ class SetpointGenerator {
     double moving_speed_mps = 0.05;    ///< the watchdog acts above this setpoint speed [m/s]
     double stop_acc_mps2 = 2.5;        ///< deceleration of the watchdog and end stops [m/s^2]
     double stop_jerk_mps3 = 10.0;      ///< rate of change of that deceleration [m/s^3]
-    double max_time_step_s = 0.25;     ///< a larger forward step of the time between samples is a jump [s]
+    /// A larger forward step of the time between samples is a jump [s]. Keep it equal to the planner's
+    /// time_jump_threshold_s: a stall shorter than this is flown on in time by both (not shifted).
+    double max_time_step_s = 1.0;
     double nominal_period_s = 0.01;    ///< the sampling period (1 / rate) assumed across a jump [s]
     bool hold_before_first_trajectory = false;  ///< sample() holds the vehicle pose before the first one
+    double max_takeover_gap_m = 0.05;             ///< larger position steps at a take-over are refused [m]
+    double max_takeover_velocity_gap_mps = 0.3;   ///< larger velocity steps at a take-over are refused [m/s]
 
     bool validate(std::string* why) const;
   };
@@ -93,6 +106,9 @@ class SetpointGenerator {
     int64_t backward_time_jumps = 0;
     int64_t forward_time_jumps = 0;
     int64_t dropped_on_watchdog = 0;    ///< queued trajectories dropped by a watchdog stop
+    int64_t discontinuous_refused = 0;  ///< refused at their take-over: not continuous with the setpoint
+    double last_takeover_gap_m = 0.0;   ///< position step of the last refused take-over [m]
+    int64_t last_refused_id = -1;       ///< its trajectory id
     double last_time_jump_s = 0.0;      ///< the last jump (new time - expected time) [s]
     double last_input_age_s = 0.0;      ///< input age when the last watchdog stop began [s]
     double last_stop_speed_mps = 0.0;   ///< speed when the last stop began [m/s]
@@ -108,8 +124,10 @@ class SetpointGenerator {
   /// same session. A trajectory replaces every queued one that starts at or after it; one of a new
   /// session replaces every queued one. Counts as the planner's liveness (like a heartbeat at the
   /// next sample). It takes over at its start time from any mode (after a stop too).
+  /// `reanchor`: the trajectory deliberately starts away from the current setpoint (exempt from the
+  /// continuity check).
   bool add(uint64_t session, int64_t id, double start_time_s, const UniformBspline& spline,
-           const std::optional<Eigen::Vector3d>& heading_target = std::nullopt);
+           const std::optional<Eigen::Vector3d>& heading_target = std::nullopt, bool reanchor = false);
   /// The planner is alive at time t (its heartbeat's arrival, caller's clock).
   void noteHeartbeat(double t);
   /// Initial heading, used until the first trajectory gives one (e.g. the vehicle's yaw).
@@ -132,6 +150,7 @@ class SetpointGenerator {
     double start = 0.0;
     UniformBspline pos, vel, acc, jerk;
     std::optional<Eigen::Vector3d> heading_target;
+    bool reanchor = false;
   };
   /// The jerk-limited stop: a speed profile along a path, from a start state.
   struct Stop {
@@ -177,6 +196,8 @@ class SetpointGenerator {
   Eigen::Vector3d vehicle_position_ = Eigen::Vector3d::Zero();
   bool sampled_ = false;  // last_t_ is set
   double last_t_ = 0.0;
+  bool have_setpoint_ = false;  // last_state_ is the last sample's state (a trajectory had started)
+  FlatState last_state_;
   double last_input_t_ = -1e300;  // last heartbeat or trajectory [s, caller's clock]
   bool input_pending_ = false;    // a trajectory was added since the last sample
 };
