@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cassert>
 #include <cmath>
+#include <limits>
 
 namespace topo_planner {
 
@@ -39,14 +40,46 @@ double guideCost(const Eigen::MatrixX3d& q, const Eigen::MatrixX3d& guide, int f
 }
 
 
+double windowDistance(const GridGeometry& g, const Eigen::Vector3d& p, Eigen::Vector3d* inward) {
+  // The interpolation domain: voxel centres, i.e. half a voxel inside the window's faces.
+  const Eigen::Vector3d half = Eigen::Vector3d::Constant(0.5 * g.resolution());
+  const Eigen::Vector3d lo = g.windowMin() + half, hi = g.windowMax() - half;
+  double best = std::numeric_limits<double>::infinity();
+  for (int axis = 0; axis < 3; ++axis) {
+    const double below = p[axis] - lo[axis], above = hi[axis] - p[axis];
+    if (below < best) {
+      best = below;
+      if (inward) *inward = Eigen::Vector3d::Unit(axis);
+    }
+    if (above < best) {
+      best = above;
+      if (inward) *inward = -Eigen::Vector3d::Unit(axis);
+    }
+  }
+  return best;
+}
+
 double collisionCost(const Eigen::MatrixX3d& q, int first, int last, const EsdfMap& map, double d0_m, double weight,
                      Eigen::MatrixX3d* grad) {
   assert(0 <= first && first <= last && last < q.rows());
+  const GridGeometry& g = map.geometry();
   double cost = 0.0;
   for (int i = first; i <= last; ++i) {
-    double distance;
+    const Eigen::Vector3d p = q.row(i).transpose();
+    if (!p.allFinite()) continue;
+    // The nearer of the obstacles (ESDF) and the window's faces (negative outside the window).
     Eigen::Vector3d gradient;
-    if (!map.interpolate(q.row(i).transpose(), &distance, &gradient)) continue;
+    double distance = windowDistance(g, p, &gradient);
+    double esdf;
+    Eigen::Vector3d esdf_gradient;
+    if (distance >= d0_m) {
+      if (!map.interpolate(p, &esdf, &esdf_gradient)) continue;  // (cannot happen this far inside)
+      distance = esdf;
+      gradient = esdf_gradient;
+    } else if (map.interpolate(p, &esdf, &esdf_gradient) && esdf < distance) {
+      distance = esdf;
+      gradient = esdf_gradient;
+    }
     const double excess = d0_m - distance;
     if (excess <= 0.0) continue;
     cost += excess * excess;

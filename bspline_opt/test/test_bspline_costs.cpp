@@ -124,8 +124,8 @@ TEST_F(CostGradients, TermsAreZeroWhereThePaperSaysSo) {
   Eigen::MatrixX3d q = randomControlPoints(10, 9);
   double best = -1.0;
   Eigen::Vector3d far = Eigen::Vector3d::Zero();
-  for (double x = 0.5; x < 7.5; x += 0.1)
-    for (double y = 0.5; y < 7.5; y += 0.1) {
+  for (double x = 1.0; x < 7.0; x += 0.1)  // (more than d0 inside the window's faces)
+    for (double y = 1.0; y < 7.0; y += 0.1) {
       const DistanceQuery d = map.query({x, y, 1.5});
       if (d.status == QueryStatus::kOk && d.distance > best) best = d.distance, far = {x, y, 1.5};
     }
@@ -139,6 +139,34 @@ TEST_F(CostGradients, TermsAreZeroWhereThePaperSaysSo) {
   EXPECT_EQ(velocityCost(q, 0.1, 3.0, 1.0, nullptr), 0.0);  // 2.24 m/s
   EXPECT_GT(velocityCost(q, 0.05, 3.0, 1.0, nullptr), 0.0);
   EXPECT_EQ(accelerationCost(q, 0.1, 2.5, 1.0, nullptr), 0.0);
+}
+
+// The window's faces count as obstacles: a point near the floor costs (d0 - its height above the
+// interpolation domain)^2 and is pushed up; a point outside costs more; the gradient matches.
+TEST(CollisionCost, TheWindowFacesCountAsObstacles) {
+  SyntheticScene scene({8.0, 8.0, 3.0});  // empty: the ESDF is the truncation distance everywhere
+  const EsdfMap& map = scene.finish();
+  const double d0 = 0.5, half = 0.5 * map.geometry().resolution();
+  Eigen::MatrixX3d q(1, 3);
+  q.row(0) << 4.0, 4.0, 1.5;
+  EXPECT_EQ(collisionCost(q, 0, 0, map, d0, 1.0, nullptr), 0.0);
+  q.row(0) << 4.0, 4.0, 0.2;
+  Eigen::MatrixX3d grad = Eigen::MatrixX3d::Zero(1, 3);
+  const double inside = collisionCost(q, 0, 0, map, d0, 1.0, &grad);
+  EXPECT_NEAR(inside, std::pow(d0 - (0.2 - half), 2), 1e-12);
+  EXPECT_LT(grad(0, 2), 0.0);  // descent moves it up
+  EXPECT_EQ(grad(0, 0), 0.0);
+  q.row(0) << 4.0, 4.0, -0.3;  // below the window
+  EXPECT_GT(collisionCost(q, 0, 0, map, d0, 1.0, nullptr), inside);
+  q.row(0) << 7.9, 4.0, 1.5;  // near a side face
+  grad.setZero();
+  EXPECT_GT(collisionCost(q, 0, 0, map, d0, 1.0, &grad), 0.0);
+  EXPECT_GT(grad(0, 0), 0.0);  // descent moves it back in (-x)
+  Eigen::MatrixX3d pts(4, 3);
+  pts << 4.0, 4.0, 0.2, 0.3, 4.0, 1.5, 4.0, 7.8, 1.5, 4.0, 4.0, 2.7;
+  expectGradientMatches([&](const Eigen::MatrixX3d& x, Eigen::MatrixX3d* g) {
+    return collisionCost(x, 0, 3, map, d0, 1.0, g);
+  }, pts, "window");
 }
 
 // f_p1 = l1s f_s + l1g f_g over the free rows, for NLopt.

@@ -267,6 +267,28 @@ TEST(PathGuidedOptimizer, OutOfMapIsReported) {
   EXPECT_EQ(PathGuidedOptimizer(testConfig()).check(s, map).status, OptimizationStatus::kOutOfMap);
 }
 
+// Under a low overhang near the window's floor (a table 0.55 m above the floor of the map, which is
+// also the window's bottom face, as with the simulation's raised floor), the overhang's ESDF
+// gradient pushes the control points down. The window's faces count as obstacles in the collision
+// cost, so the curve settles between the two instead of leaving the map (it failed the final check
+// as "out of map" before, every time: a vehicle stuck at rest near the floor).
+TEST(PathGuidedOptimizer, TheWindowFloorKeepsTheCurveInsideTheMap) {
+  SyntheticScene scene({12.0, 6.0, 3.0});
+  scene.box({5.0, -1.0, 0.55}, {7.0, 7.0, 4.0});  // the whole width, from 0.55 m up
+  const EsdfMap& map = scene.finish();
+  const Eigen::Vector3d start(1.0, 3.0, 0.3), goal(11.0, 3.0, 0.3);
+  const UniformBspline initial = reference(start, goal);
+  const Path guide{start, {6.0, 3.0, 0.3}, goal};
+  PathGuidedOptimizer::Config config = testConfig();
+  config.clearance_m = 0.2;  // the gap: 0.05 (interpolation domain) .. 0.55 m (the box), d0 = 0.5
+  const PathGuidedOptimizer optimizer(config);
+  const OptimizationResult r = optimizer.optimize(initial, guide, map);
+  EXPECT_EQ(r.status, OptimizationStatus::kSuccess) << toString(r.status) << " " << r.message;
+  const Oracle o = oracle(r.spline, map);
+  EXPECT_FALSE(o.out_of_map);
+  EXPECT_GE(o.min_distance, config.clearance_m);
+}
+
 TEST(PathGuidedOptimizer, AlgorithmsAndRestartsAreRepeatable) {
   SyntheticScene scene({12.0, 10.0, 3.0});
   scene.box({5.0, 2.0, -1.0}, {7.0, 8.0, 4.0});

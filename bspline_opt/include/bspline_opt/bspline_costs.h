@@ -24,9 +24,17 @@ double guideCost(const Eigen::MatrixX3d& q, const Eigen::MatrixX3d& guide, int f
                  Eigen::MatrixX3d* grad);
 
 
-/// Collision cost on the free control points: sum of (d0 - d(Q_i))^2 over the points whose ESDF
-/// distance d (trilinear, EsdfMap::interpolate) is below d0; zero beyond d0, C1 at d0 [m^2]. Points
-/// outside the map (or NaN) contribute nothing here; the final check reports them.
+/// Signed distance of p to the faces of the map's window (the domain of EsdfMap::interpolate: half a
+/// voxel inside them), negative outside; *inward (optional) is the unit normal of the nearest face,
+/// pointing into the window [m].
+double windowDistance(const GridGeometry& geometry, const Eigen::Vector3d& p, Eigen::Vector3d* inward);
+
+/// Collision cost on the free control points: sum of (d0 - d(Q_i))^2 over the points whose distance
+/// d is below d0; zero beyond d0, C1 at d0 [m^2]. d is the smaller of the ESDF distance (trilinear,
+/// EsdfMap::interpolate) and windowDistance: the map window's faces count as obstacles, since
+/// nothing outside the window is known or checkable (the final check refuses a curve that leaves
+/// it), so a curve near a face (a raised floor, a ceiling, the window's edge) is pushed back inside
+/// instead of failing the final check every time. NaN points contribute nothing.
 double collisionCost(const Eigen::MatrixX3d& q, int first, int last, const EsdfMap& map, double d0_m, double weight,
                      Eigen::MatrixX3d* grad);
 
