@@ -201,7 +201,10 @@ void PlannerServer::safetyTimer(const ros::TimerEvent&) {
   FsmOutput out;
   mapping_->readMaps([&](const OccupancyMap&, const EsdfMap& esdf) { out = fsm_->checkSafety(now, esdf); });
   handle(out);
-  publishHeartbeat(now);
+  // While the trajectory server does not follow this planner's trajectory, no heartbeat: its watchdog
+  // stops the vehicle along its path (what it flies is no longer checked here), then the FSM plans
+  // from its hold.
+  if (!out.server_diverged) publishHeartbeat(now);
   const int jumps = fsm_->timeJumps();
   if (jumps != time_jumps_logged_) {
     ROS_WARN("planner: ROS time jumped (%d so far): timing shifted, replanning from the current state", jumps);
@@ -384,6 +387,7 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("fsm/time_jump_threshold_s", f.time_jump_threshold_s);
   r.read("fsm/server_timeout_s", f.server_timeout_s);
   r.read("fsm/server_grace_s", f.server_grace_s);
+  r.read("fsm/server_position_tolerance_m", f.server_position_tolerance_m);
   r.read("fsm/waypoint_reached_radius_m", f.waypoint_reached_radius_m);
 
   // Limits: the optimiser's are the vehicle's; the reference flies below them (reference_speed_ratio)

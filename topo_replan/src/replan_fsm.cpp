@@ -156,6 +156,8 @@ bool ReplanFsm::Config::validate(std::string* why) const {
   if (!(max_start_velocity_step_mps >= 0.0)) return bad("max_start_velocity_step_mps must be >= 0");
   if (!(server_timeout_s > 0.0) || !std::isfinite(server_timeout_s)) return bad("server_timeout_s must be positive");
   if (!(server_grace_s >= 0.0) || !std::isfinite(server_grace_s)) return bad("server_grace_s must be >= 0");
+  if (!(server_position_tolerance_m > 0.0) || !std::isfinite(server_position_tolerance_m))
+    return bad("server_position_tolerance_m must be positive");
   return true;
 }
 
@@ -234,39 +236,88 @@ void ReplanFsm::setServerSetpoint(const ServerSetpoint& setpoint) {
 bool ReplanFsm::followServerLocked(double t, const EsdfMap& map, FsmOutput* out) {
   if (!server_ || !(std::abs(t - server_->stamp_s) <= config_.server_timeout_s)) return false;
   const ServerSetpoint& sp = *server_;
-  const ExecTrajectory* flown = flownAtLocked(sp.stamp_s);
-  const bool started = flown && sp.stamp_s >= flown->start_time_s + config_.server_grace_s;
+  // A setpoint sampled before this FSM's last re-anchoring predates it: nothing new.
+  if (sp.stamp_s <= server_anchor_s_) return false;
+  const double grace = config_.server_grace_s;
+  // The trajectory of ours the server should follow at its stamp: the current one once its start
+  // (plus the message latency) has passed, the one it replaced until then.
+  const ExecTrajectory* expected = nullptr;
+  bool settled = false;  // the current one has started long enough ago that the server must be on it
+  if (current_) {
+    settled = sp.stamp_s >= current_->start_time_s + grace;
+    expected = &*current_;
+  }
   std::string why;
   if (sp.mode == ServerSetpoint::Mode::kStopping) {
     why = "it stops on its own (watchdog or end stop)";
   } else if (sp.mode == ServerSetpoint::Mode::kTrajectory) {
-    const bool ours = sp.own_session && ((current_ && sp.trajectory_id == current_->id) ||
-                                         (previous_ && sp.trajectory_id == previous_->id));
-    if (!ours && (!current_ || started)) why = "it follows a trajectory this planner did not command";
-  } else if (sp.mode == ServerSetpoint::Mode::kHold && started &&
-             takeoverStateLocked(sp.stamp_s).velocity.norm() > config_.stopped_speed_mps) {
-    why = "it holds while the commanded trajectory moves";
+    const ExecTrajectory* on = nullptr;  // the trajectory of ours it follows
+    if (sp.own_session && current_ && sp.trajectory_id == current_->id) on = &*current_;
+    if (sp.own_session && !settled && previous_ && sp.trajectory_id == previous_->id) on = &*previous_;
+    if (!on && (!current_ || settled)) {
+      why = "it follows a trajectory this planner did not command (or no longer commands)";
+    } else if (on && sp.velocity.norm() > config_.stopped_speed_mps) {
+      // On our trajectory: keep the timing in step with the server's (a clock step each side saw
+      // at another moment and shifted by another estimate of the time between calls).
+      const double tau = sp.stamp_s - on->start_time_s, d = on->spline.duration();
+      auto error = [&](double delta) {
+        return (on->spline.evaluate(std::clamp(tau + delta, 0.0, d)) - sp.position).norm();
+      };
+      if (error(0.0) > 0.01) {
+        double best = 0.0, best_error = error(0.0);
+        const double range = std::min(config_.time_jump_threshold_s, 1.0);
+        for (double delta = -range; delta <= range; delta += 0.005)
+          if (const double e = error(delta); e < best_error) best = delta, best_error = e;
+        for (double delta = best - 0.005; delta <= best + 0.005; delta += 0.0005)
+          if (const double e = error(delta); e < best_error) best = delta, best_error = e;
+        if (best_error <= 0.01 && best != 0.0) {
+          for (std::optional<ExecTrajectory>* traj : {&current_, &previous_})
+            if (*traj) {
+              (*traj)->start_time_s -= best;
+              (*traj)->brake_start_s -= best;
+            }
+          ++server_resyncs_;
+          char text[160];
+          std::snprintf(text, sizeof(text), "timing re-synchronised with the trajectory server by %+.3f s", -best);
+          if (!out->message.empty()) out->message += "; ";
+          out->message += text;
+        }
+      }
+    }
+  } else if (sp.mode == ServerSetpoint::Mode::kHold && expected && settled) {
+    const FlatState commanded = takeoverStateLocked(sp.stamp_s);
+    if (commanded.velocity.norm() > config_.stopped_speed_mps)
+      why = "it holds while the commanded trajectory moves";
+    else if ((commanded.position - sp.position).norm() > config_.server_position_tolerance_m)
+      why = "it holds away from the commanded position";
   }
   if (why.empty()) {
     server_reported_ = false;
     return false;
   }
+  out->server_diverged = true;
   if (sp.mode != ServerSetpoint::Mode::kHold) {
     if (!server_reported_) {
       server_reported_ = true;
       if (!out->message.empty()) out->message += "; ";
       out->message += "the trajectory server does not follow the commanded trajectory (" + why +
-                      "): waiting for its hold";
+                      "): waiting for its hold (no heartbeat meanwhile, so its watchdog stops the vehicle)";
     }
     return true;
   }
   // At its hold: that is the commanded state now. Hold there (a trajectory at rest, continuous with
   // the server's setpoint) and replan from it (EMERGENCY_STOP: from rest through the goals left).
   server_reported_ = false;
+  server_anchor_s_ = t;
   const FlatState hold = FlatState::atRest(sp.position);
   emergencyStopLocked(t, map, "the trajectory server holds on its own (" + why + "): holding there", out, &hold,
                       ReplanStatus::kInvalidInput);
   return true;
+}
+
+int ReplanFsm::serverResyncs() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return server_resyncs_;
 }
 
 void ReplanFsm::setDepthFused(double stamp_s, double arrival_s) {
@@ -360,9 +411,11 @@ void ReplanFsm::observeClockLocked(double now, FsmOutput* out) {
   shiftOld(&depth_stamp_s_);
   shiftOld(&depth_arrival_s_);
   if (server_) shiftOld(&server_->stamp_s);
+  shiftOld(&server_anchor_s_);
   last_clock_s_ = now;
   ++time_jumps_;
   time_jumped_ = true;
+  time_jump_clock_s_ = now;
   if (!out->message.empty()) out->message += "; ";
   char text[128];
   std::snprintf(text, sizeof(text), "time jump of %+.3f s: timing shifted by %+.3f s, replanning from the current state",
@@ -422,8 +475,8 @@ FlatState ReplanFsm::takeoverStateLocked(double t_takeover) const {
   if (!current_) {
     // Not commanded yet: the trajectory server holds (a restarted planner: where its stop ended), or
     // the controller holds the position where it started.
-    if (server_ && server_->mode == ServerSetpoint::Mode::kHold && std::abs(t_takeover - server_->stamp_s) <=
-                                                                           config_.server_timeout_s + 1.0)
+    if (server_ && (server_->mode == ServerSetpoint::Mode::kHold || server_->mode == ServerSetpoint::Mode::kBeforeFirst) &&
+        std::abs(t_takeover - server_->stamp_s) <= config_.server_timeout_s + 1.0)
       return FlatState::atRest(server_->position);
     return FlatState::atRest(odom_position_);
   }
@@ -874,7 +927,7 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
   FsmOutput out;
   if (!std::isfinite(t)) return out;
   observeClockLocked(t, &out);
-  if (state_ != FsmState::kInit && followServerLocked(t, map, &out)) return out;
+  if (have_odom_ && followServerLocked(t, map, &out)) return out;
   // Nothing is planned on stale inputs (checkSafety() brakes a moving vehicle); goals wait.
   std::string stale;
   if (state_ != FsmState::kInit && !inputsFreshLocked(t, &stale)) {
@@ -889,6 +942,12 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
     }
     return out;
   }
+  // After a time jump the replan waits for a trajectory server setpoint sampled after it (when a
+  // server reports): the FSM re-synchronises its timing to it first (followServerLocked), since the
+  // two shifted by their own estimates of the time between calls.
+  if (time_jumped_ && server_ && std::abs(t - server_->stamp_s) <= config_.server_timeout_s &&
+      server_->stamp_s < time_jump_clock_s_)
+    return out;
   const bool jumped = std::exchange(time_jumped_, false);
   if (inputs_reported_ && state_ != FsmState::kInit) {
     inputs_reported_ = false;
@@ -999,8 +1058,8 @@ FsmOutput ReplanFsm::checkSafety(double t, const EsdfMap& map) {
   FsmOutput out;
   if (!std::isfinite(t)) return out;
   observeClockLocked(t, &out);
-  if (state_ == FsmState::kInit || followServerLocked(t, map, &out)) return out;
-  if (!current_) return out;
+  if (have_odom_ && followServerLocked(t, map, &out)) return out;
+  if (!current_ || state_ == FsmState::kInit) return out;
   const bool active = t < current_->endTime();
   const double commanded_speed = active ? takeoverStateLocked(t).velocity.norm() : 0.0;
   // Stale inputs: a moving vehicle brakes to a hover (a braking trajectory already does).

@@ -127,6 +127,7 @@ void SetpointGenerator::shiftTimes(double shift) {
   current_.start += shift;
   for (Entry& e : queue_) e.start += shift;
   stop_.t0 += shift;
+  hold_since_ += shift;
   last_input_t_ += shift;
 }
 
@@ -288,6 +289,29 @@ double SetpointGenerator::updateYaw(double dt, const Eigen::Vector3d& position, 
   return yaw_;
 }
 
+bool SetpointGenerator::commandedAt(double t, FlatState* state) const {
+  if (!active_) {
+    // Before the first trajectory only a streamed hold is a commanded state.
+    if (!config_.hold_before_first_trajectory || !have_pose_ || !sampled_) return false;
+    *state = FlatState::atRest(vehicle_position_);
+    return true;
+  }
+  if (mode_ == Setpoint::Mode::kHold && t >= hold_since_) {
+    *state = FlatState::atRest(hold_position_);
+    return true;
+  }
+  const bool stop = mode_ == Setpoint::Mode::kEndStop || mode_ == Setpoint::Mode::kWatchdogStop ||
+                    (mode_ == Setpoint::Mode::kHold && hold_after_stop_);
+  if (stop && t >= stop_.t0) {
+    *state = stopState(std::min(t, stop_.t0 + stop_.duration()));
+    return true;
+  }
+  const double duration = current_.pos.duration();
+  *state = trajectoryState(current_, std::clamp(t - current_.start, 0.0, duration));
+  if (t - current_.start >= duration && state->velocity.norm() <= kRestSpeedMps) *state = FlatState::atRest(state->position);
+  return true;
+}
+
 bool SetpointGenerator::sample(double t, Setpoint* out) {
   if (!std::isfinite(t)) return false;
   // Time jumps: shift every stored time so that this sample is one nominal period after the last.
@@ -312,18 +336,20 @@ bool SetpointGenerator::sample(double t, Setpoint* out) {
   }
 
   // The newest queued trajectory whose start has come takes over (also from a stop or a hold), if it
-  // goes on from the setpoint it replaces: the last one moved on by dt at its velocity.
-  const Eigen::Vector3d expected_position = last_state_.position + dt * last_state_.velocity;
+  // starts from the state commanded at its start time (what the planner plans from: its takeover
+  // state; judged at the start time, so a late arrival, e.g. an emergency brake, is not refused).
   while (!queue_.empty() && queue_.front().start <= t) {
     Entry next = std::move(queue_.front());
     queue_.pop_front();
-    if (have_setpoint_ && !next.reanchor) {
-      const FlatState s = trajectoryState(next, std::min(t - next.start, next.pos.duration()));
-      const double gap = (s.position - expected_position).norm();
-      const double velocity_gap = (s.velocity - last_state_.velocity).norm();
+    FlatState before;
+    if (!next.reanchor && commandedAt(next.start, &before)) {
+      const FlatState s = trajectoryState(next, 0.0);
+      const double gap = (s.position - before.position).norm();
+      const double velocity_gap = (s.velocity - before.velocity).norm();
       if (!(gap <= config_.max_takeover_gap_m) || !(velocity_gap <= config_.max_takeover_velocity_gap_mps)) {
         ++stats_.discontinuous_refused;
         stats_.last_takeover_gap_m = gap;
+        stats_.last_takeover_velocity_gap_mps = velocity_gap;
         stats_.last_refused_id = next.id;
         continue;
       }
@@ -356,6 +382,8 @@ bool SetpointGenerator::sample(double t, Setpoint* out) {
       } else {
         mode_ = Setpoint::Mode::kHold;
         hold_position_ = end.position;
+        hold_since_ = current_.start + duration;
+        hold_after_stop_ = false;
       }
     } else {
       const FlatState state = trajectoryState(current_, tau);
@@ -375,6 +403,8 @@ bool SetpointGenerator::sample(double t, Setpoint* out) {
   if (stopping && t - stop_.t0 >= stop_.duration()) {
     mode_ = Setpoint::Mode::kHold;
     hold_position_ = stopState(stop_.t0 + stop_.duration()).position;
+    hold_since_ = stop_.t0 + stop_.duration();
+    hold_after_stop_ = true;
   }
   Eigen::Vector3d ahead = Eigen::Vector3d::Zero();
   if (mode_ == Setpoint::Mode::kTrajectory) {
@@ -389,8 +419,6 @@ bool SetpointGenerator::sample(double t, Setpoint* out) {
   sp.trajectory_id = current_.id;
   sp.planner_session = current_.session;
   sp.yaw = updateYaw(dt, sp.state.position, ahead, &sp.yaw_rate);
-  last_state_ = sp.state;
-  have_setpoint_ = true;
   *out = sp;
   return true;
 }

@@ -767,19 +767,24 @@ TEST(ReplanFsm, RebuiltMissionsKeepOnlyTheGoalsNotReached) {
 struct ServerLoopLog {
   bool goal_reached = false;
   double max_position_step = 0.0;  // largest setpoint step between samples beyond |v| dt [m]
+  double max_velocity_rate = 0.0;  // largest |dv| / dt between samples [m/s^2]
   SetpointGenerator::Stats server;
   std::vector<std::string> messages;
 };
 
 // The FSM and the trajectory server's core (SetpointGenerator) in one loop, as planner_node and
 // traj_server_node run them: the server samples at 100 Hz and the vehicle is its setpoint (odometry =
-// setpoint + odom_offset); the planner runs at 20 Hz (checkSafety, tick, heartbeat) except in
+// setpoint + odom_offset); the planner runs at 20 Hz on average, 20 and 80 ms apart in turn
+// (checkSafety, tick, heartbeat), except in
 // [stall_from, stall_to) (a stalled or dead process). With `restart`, a new FSM (a new planner
 // session) takes over at stall_to and is given the goal again. With `tell_fsm`, the FSM gets the
-// server's setpoint (PositionCommand) before each call.
+// server's setpoint (PositionCommand) before each call, and the heartbeat is not sent while the FSM
+// reports the server diverged (as planner_node does). Trajectories reach the server latency_s after
+// they are published.
 ServerLoopLog flyWithServer(const EsdfMap& map, const Eigen::Vector3d& start, const Eigen::Vector3d& goal,
                             double stall_from, double stall_to, bool restart, bool tell_fsm,
-                            const Eigen::Vector3d& odom_offset, double max_t) {
+                            const Eigen::Vector3d& odom_offset, double max_t, double latency_s = 0.06,
+                            double clock_step_at = INFINITY, double clock_step_s = 0.0, int* resyncs = nullptr) {
   ServerLoopLog log;
   std::unique_ptr<ReplanFsm> fsm = makeFsm();
   uint64_t session = 1;
@@ -792,10 +797,17 @@ ServerLoopLog flyWithServer(const EsdfMap& map, const Eigen::Vector3d& start, co
   fsm->setDepthFused(0.0);
   EXPECT_EQ(fsm->setGoals({goal}), GoalStatus::kAccepted);
   bool restarted = false;
+  struct InFlight {
+    double arrival;
+    uint64_t session;
+    ExecTrajectory trajectory;
+  };
+  std::vector<InFlight> in_flight;
   for (int k = 0; k * 0.01 <= max_t && !log.goal_reached; ++k) {
-    const double t = k * 0.01;
-    const bool stalled = t >= stall_from && t < stall_to;
-    if (restart && !restarted && t >= stall_to) {
+    const double t_true = k * 0.01;
+    const double t = t_true + (t_true >= clock_step_at ? clock_step_s : 0.0);  // everyone's ROS time
+    const bool stalled = t_true >= stall_from && t_true < stall_to;
+    if (restart && !restarted && t_true >= stall_to) {
       restarted = true;
       fsm = makeFsm();
       session = 2;
@@ -803,7 +815,7 @@ ServerLoopLog flyWithServer(const EsdfMap& map, const Eigen::Vector3d& start, co
       fsm->setDepthFused(t);
       EXPECT_EQ(fsm->setGoals({goal}), GoalStatus::kAccepted);
     }
-    if (!stalled && k % 5 == 0) {
+    if (!stalled && (k % 10 == 0 || k % 10 == 2)) {  // irregular, 20 Hz on average
       fsm->setOdometry(t, position + odom_offset, velocity);
       fsm->setDepthFused(t);
       if (tell_fsm && have_sp) {
@@ -819,28 +831,38 @@ ServerLoopLog flyWithServer(const EsdfMap& map, const Eigen::Vector3d& start, co
         s.trajectory_id = sp.trajectory_id;
         fsm->setServerSetpoint(s);
       }
+      bool diverged = false;
       for (const FsmOutput& out : {fsm->checkSafety(t, map), fsm->tick(t, map)}) {
         if (!out.message.empty()) log.messages.push_back(out.message);
-        if (out.trajectory) {
-          const ExecTrajectory& e = *out.trajectory;
-          gen.add(session, e.id, e.start_time_s, e.spline,
-                  e.has_heading_target ? std::optional<Eigen::Vector3d>(e.heading_target) : std::nullopt, e.reanchor);
-        }
+        if (out.trajectory) in_flight.push_back({t_true + latency_s, session, *out.trajectory});
         log.goal_reached = log.goal_reached || out.goal_reached;
+        diverged = diverged || out.server_diverged;
       }
-      gen.noteHeartbeat(t);
+      if (!diverged) gen.noteHeartbeat(t);
+    }
+    for (auto it = in_flight.begin(); it != in_flight.end();) {
+      if (it->arrival > t_true + 1e-9) {
+        ++it;
+        continue;
+      }
+      const ExecTrajectory& e = it->trajectory;
+      gen.add(it->session, e.id, e.start_time_s, e.spline,
+              e.has_heading_target ? std::optional<Eigen::Vector3d>(e.heading_target) : std::nullopt, e.reanchor);
+      it = in_flight.erase(it);
     }
     Setpoint next;
     if (!gen.sample(t, &next)) continue;
     if (have_sp) {
       const double v = std::max(next.state.velocity.norm(), sp.state.velocity.norm());
       log.max_position_step = std::max(log.max_position_step, (next.state.position - sp.state.position).norm() - v * 0.01);
+      log.max_velocity_rate = std::max(log.max_velocity_rate, (next.state.velocity - sp.state.velocity).norm() / 0.01);
     }
     sp = next, sp_t = t, have_sp = true;
     position = sp.state.position;
     velocity = sp.state.velocity;
   }
   log.server = gen.stats();
+  if (resyncs) *resyncs = fsm->serverResyncs();
   return log;
 }
 
@@ -857,6 +879,7 @@ TEST(ReplanFsm, PlansFromTheServersHoldAfterAWatchdogStop) {
   EXPECT_EQ(log.server.watchdog_stops, 1);
   EXPECT_EQ(log.server.discontinuous_refused, 0);
   EXPECT_LT(log.max_position_step, 1e-3);
+  EXPECT_LT(log.max_velocity_rate, testConfig().max_brake_acc_mps2 + 1.0);
   bool waited = false;
   for (const std::string& m : log.messages) waited = waited || m.find("waiting for its hold") != std::string::npos;
   EXPECT_TRUE(waited);
@@ -867,7 +890,31 @@ TEST(ReplanFsm, PlansFromTheServersHoldAfterAWatchdogStop) {
   EXPECT_GT(blind.server.discontinuous_refused, 0);
 }
 
-// The planner dies mid-flight and a new one starts 1.5 s later while the odometry reads 0.2 m off the
+// ROS time steps forward by 3 s mid-flight. The FSM and the server each shift their timing by the
+// step less their own estimate of the time between calls (the FSM's calls come 20 and 80 ms apart,
+// 50 ms on average, and the step comes after an 80 ms gap; the server's every 10 ms): told the
+// server's setpoint, the FSM re-synchronises its timing to it, so its replan after the step takes
+// over (the counterpart, not told, is refused by the server).
+TEST(ReplanFsm, KeepsItsTimingInStepWithTheServerAcrossAClockStep) {
+  Corridor c;
+  const EsdfMap& map = c.scene.finish();
+  int resyncs = 0;
+  const ServerLoopLog log = flyWithServer(map, {1, 4, 1.5}, {22, 4, 1.5}, INFINITY, INFINITY, false, true,
+                                          Eigen::Vector3d::Zero(), 40.0, 0.06, 3.0, 3.0, &resyncs);
+  EXPECT_TRUE(log.goal_reached);
+  EXPECT_EQ(log.server.forward_time_jumps, 1);
+  EXPECT_GE(resyncs, 1);
+  EXPECT_EQ(log.server.discontinuous_refused, 0);
+  EXPECT_EQ(log.server.watchdog_stops, 0);
+  EXPECT_LT(log.max_position_step, 1e-3);
+
+  const ServerLoopLog blind = flyWithServer(map, {1, 4, 1.5}, {22, 4, 1.5}, INFINITY, INFINITY, false, false,
+                                            Eigen::Vector3d::Zero(), 8.0, 0.06, 3.0, 3.0);
+  EXPECT_GT(blind.server.discontinuous_refused, 0);
+}
+
+// The planner dies mid-flight and a new one starts (1.5 s later, or 0.7 s later while the server's
+// watchdog stop is still under way) while the odometry reads 0.2 m off the
 // setpoint (tracking error): the new FSM starts from the server's hold, not from the odometry, so its
 // first trajectory takes over without a step. The counterpart (not told) is refused (until the FSM
 // finds the odometry far from its own trajectory and re-anchors on it).
@@ -875,12 +922,16 @@ TEST(ReplanFsm, ARestartedPlannerStartsFromTheServersHold) {
   Corridor c;
   const EsdfMap& map = c.scene.finish();
   const Eigen::Vector3d offset(0.0, 0.2, 0.0);
-  const ServerLoopLog log = flyWithServer(map, {1, 4, 1.5}, {22, 4, 1.5}, 3.0, 4.5, true, true, offset, 40.0);
-  EXPECT_TRUE(log.goal_reached);
-  EXPECT_EQ(log.server.watchdog_stops, 1);
-  EXPECT_EQ(log.server.session_changes, 1);
-  EXPECT_EQ(log.server.discontinuous_refused, 0);
-  EXPECT_LT(log.max_position_step, 1e-3);
+  // The new planner starts once the server holds (4.5 s), and while it still stops (3.7 s: it waits).
+  for (const double restart_at : {4.5, 3.7}) {
+    const ServerLoopLog log = flyWithServer(map, {1, 4, 1.5}, {22, 4, 1.5}, 3.0, restart_at, true, true, offset, 40.0);
+    EXPECT_TRUE(log.goal_reached) << restart_at;
+    EXPECT_EQ(log.server.watchdog_stops, 1) << restart_at;
+    EXPECT_EQ(log.server.session_changes, 1) << restart_at;
+    EXPECT_EQ(log.server.discontinuous_refused, 0) << restart_at;
+    EXPECT_LT(log.max_position_step, 1e-3) << restart_at;
+    EXPECT_LT(log.max_velocity_rate, testConfig().max_brake_acc_mps2 + 1.0) << restart_at;
+  }
 
   const ServerLoopLog blind = flyWithServer(map, {1, 4, 1.5}, {22, 4, 1.5}, 3.0, 4.5, true, false, offset, 8.0);
   EXPECT_GT(blind.server.discontinuous_refused, 0);
@@ -889,21 +940,32 @@ TEST(ReplanFsm, ARestartedPlannerStartsFromTheServersHold) {
 // Odometry stamped ahead of the clock (another time base, or a skewed sensor clock) is refused, and
 // does not make the next, correctly stamped, odometry look backwards.
 TEST(ReplanFsm, RefusesOdometryStampedAheadOfTheClock) {
-  auto fsm = makeFsm();
+  ReplanFsm::Config config = testConfig();
+  config.depth_timeout_s = 0.5;
+  auto fsm = makeFsm(config);
   std::string why;
   ASSERT_TRUE(fsm->setOdometry(1.0, {1, 1, 1}, Eigen::Vector3d::Zero(), 1.0, &why));
+  fsm->setDepthFused(1.0, 1.0);
+  // The clock steps forward by 2.6 s; the odometry and a depth frame of the new time base arrive
+  // before this process's clock has stepped.
   EXPECT_FALSE(fsm->setOdometry(3.6, {1, 1, 1}, Eigen::Vector3d::Zero(), 1.01, &why));
   EXPECT_NE(why.find("ahead of the clock"), std::string::npos) << why;
-  EXPECT_TRUE(fsm->setOdometry(1.02, {1, 1, 1}, Eigen::Vector3d::Zero(), 1.02, &why)) << why;
-  // The clock steps forward by 2.6 s after an odometry of the new time base was refused: the stored
-  // stamp (old base) moves with the clock, so the next odometry (new base) is fresh and in order.
+  fsm->setDepthFused(3.605, 1.015);
+  EXPECT_TRUE(fsm->setOdometry(1.02, {1, 1, 1}, Eigen::Vector3d::Zero(), 1.02, &why)) << why;  // old base, in order
+  // The clock steps: the stored odometry stamp (old base) moves with it, the depth stamp (already in
+  // the new base) does not: both are fresh, not 2.6 s old or 2.6 s ahead.
   Corridor c;
   const EsdfMap& map = c.scene.finish();
   fsm->checkSafety(3.63, map);
   EXPECT_EQ(fsm->timeJumps(), 1);
+  const InputHealth h = fsm->inputHealth(3.63);
+  EXPECT_TRUE(h.ok) << h.why;
+  EXPECT_GE(h.odom_age_s, 0.0);
+  EXPECT_LT(h.odom_age_s, 0.1);
+  EXPECT_GE(h.depth_age_s, 0.0);
+  EXPECT_LT(h.depth_age_s, 0.1);
+  // The next odometry (new base) is in order.
   EXPECT_TRUE(fsm->setOdometry(3.635, {1, 1, 1}, Eigen::Vector3d::Zero(), 3.64, &why)) << why;
-  EXPECT_TRUE(fsm->inputHealth(3.64).ok || fsm->inputHealth(3.64).why.find("depth") != std::string::npos)
-      << fsm->inputHealth(3.64).why;
 }
 
 TEST(ReplanFsm, InvalidConfigIsRefused) {

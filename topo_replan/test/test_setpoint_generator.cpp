@@ -444,27 +444,52 @@ TEST(SetpointGenerator, WatchdogCountsElapsedTimeAcrossATimeJump) {
 
 // A stall of the sampling shorter than max_time_step_s (a loaded computer) is not a time jump: the
 // setpoint goes on in time, as the planner's clock does (the planner only shifts beyond its own
-// threshold, equal by default), so the planner's next trajectory still joins it.
+// threshold, equal by default), so the planner's next trajectory, taking over during the stall on a
+// curve, still joins and is not refused.
 TEST(SetpointGenerator, AStallIsFlownOnInTimeNotShifted) {
   SetpointGenerator gen{SetpointGenerator::Config()};
-  const UniformBspline a = constantVelocity({0, 0, 1}, {3, 0, 0}, 10.0);
+  const UniformBspline a = arc({0, 0, 1}, 3.0, 3.0, 10.0);  // 3 m/s on a 3 m radius: 3 m/s^2 centripetal
   ASSERT_TRUE(gen.add(1, 0, 0.0, a));
   Setpoint sp;
   for (int k = 0; k <= 100; ++k) {
     gen.noteHeartbeat(k * kDt);
     ASSERT_TRUE(gen.sample(k * kDt, &sp));
   }
+  // The planner's trajectory from the state on `a` at 1.2 s (its takeover time), straight on.
+  const UniformBspline av = a.derivative();
+  ASSERT_TRUE(gen.add(1, 1, 1.2, constantVelocity(a.evaluate(1.2), av.evaluate(1.2), 2.0)));
   const double t = 1.0 + 0.4;  // 0.4 s without a sample
   gen.noteHeartbeat(t);
   ASSERT_TRUE(gen.sample(t, &sp));
   EXPECT_EQ(gen.stats().forward_time_jumps, 0);
-  EXPECT_LT((sp.state.position - a.evaluate(t)).norm(), 1e-9);
-  // The planner's trajectory from its clock's state joins.
-  ASSERT_TRUE(gen.add(1, 1, t + 0.1, constantVelocity(a.evaluate(t + 0.1), {3, 0, 0}, 2.0)));
-  for (int k = 1; k <= 20; ++k) {
-    gen.noteHeartbeat(t + k * kDt);
-    ASSERT_TRUE(gen.sample(t + k * kDt, &sp));
+  EXPECT_EQ(gen.stats().discontinuous_refused, 0);
+  EXPECT_EQ(sp.trajectory_id, 1);
+  EXPECT_LT((sp.state.position - (a.evaluate(1.2) + 0.2 * av.evaluate(1.2))).norm(), 1e-6);
+}
+
+// An emergency brake starts at the planner's "now" and reaches the server 80 ms later: judged at its
+// start time against the trajectory it replaces, it takes over (judged against the setpoint of the
+// moment it would have been refused: 0.4 m/s of velocity difference by then).
+TEST(SetpointGenerator, ALateBrakeIsJudgedAtItsStartTime) {
+  SetpointGenerator gen{SetpointGenerator::Config()};
+  const UniformBspline a = constantVelocity({0, 0, 1}, {3, 0, 0}, 10.0);
+  ASSERT_TRUE(gen.add(1, 0, 0.0, a));
+  Setpoint sp;
+  double t = 0.0;
+  for (; t < 1.075; t += kDt) {
+    gen.noteHeartbeat(t);
+    ASSERT_TRUE(gen.sample(t, &sp));
   }
+  // Braking at 5 m/s^2 from (a at 1.0): control points of a constant deceleration.
+  const double h = 0.05, v0 = 3.0, acc = 5.0;
+  std::vector<Eigen::Vector3d> pts;
+  for (double s = 0.0; s <= v0 / acc + 1e-9; s += h) pts.push_back(a.evaluate(1.0) + Eigen::Vector3d(v0 * s - 0.5 * acc * s * s, 0, 0));
+  UniformBspline brake;
+  ASSERT_TRUE(UniformBspline::fitToPoints(pts, h, Eigen::Vector3d(v0, 0, 0), Eigen::Vector3d(-acc, 0, 0),
+                                          Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), 3, &brake));
+  ASSERT_TRUE(gen.add(1, 1, 1.0, brake));
+  gen.noteHeartbeat(t);
+  ASSERT_TRUE(gen.sample(t, &sp));
   EXPECT_EQ(sp.trajectory_id, 1);
   EXPECT_EQ(gen.stats().discontinuous_refused, 0);
 }

@@ -51,11 +51,14 @@
 // follows it. When the server's published setpoint (setServerSetpoint, fresh within
 // server_timeout_s) shows that it does not (it stopped on its own: watchdog, a trajectory that ended
 // moving; it refused a trajectory that was not continuous; it holds while the FSM's trajectory
-// moves; or a restarted planner finds it on another session's trajectory), the FSM publishes
-// nothing and skips its own checks until the server holds, then takes the hold as its commanded
-// state (a trajectory at rest there) and replans from it. Before its first trajectory the FSM
-// starts from the server's hold rather than from odometry. Without server setpoints, the FSM's
-// trajectory is the commanded state.
+// moves or away from the commanded position; or a restarted planner finds it on another session's
+// trajectory), the FSM publishes nothing, skips its own checks and asks the caller to send no
+// heartbeat (FsmOutput::server_diverged: the server's watchdog then stops the vehicle along its
+// path) until the server holds, then takes the hold as its commanded state (a trajectory at rest
+// there) and replans from it. Before its first trajectory the FSM starts from the server's hold
+// rather than from odometry. While the server follows the FSM's trajectory, the FSM keeps its
+// timing in step with the server's setpoint (after a clock step each side saw at another moment).
+// Without server setpoints, the FSM's trajectory is the commanded state.
 //
 // Time. A clock that steps backwards or forwards by more than time_jump_threshold_s between two
 // calls (setOdometry's arrival time, tick, checkSafety) is a time jump: every stored time (the
@@ -164,6 +167,9 @@ struct FsmOutput {
   /// Odometry jumped away from the commanded state (a VIO relocalisation): the map built in the old
   /// frame no longer lines up with the new one; the caller may forget it.
   bool odometry_jumped = false;
+  /// The trajectory server does not follow the commanded trajectory: the caller sends no heartbeat
+  /// (the server's watchdog then stops the vehicle) until the FSM has re-anchored on its hold.
+  bool server_diverged = false;
   std::string message;                            ///< a notable transition, for the log
 };
 
@@ -220,6 +226,8 @@ class ReplanFsm {
     double server_timeout_s = 0.25;
     /// The server is on a trajectory of this planner's that has started this long (message latency) [s].
     double server_grace_s = 0.15;
+    /// A server hold farther than this from the commanded position is not the commanded hold [m].
+    double server_position_tolerance_m = 0.1;
 
     bool validate(std::string* why) const;
   };
@@ -259,6 +267,7 @@ class ReplanFsm {
   /// The goals of the mission not reached yet (what a rebuilt reference goes through).
   std::vector<Eigen::Vector3d> remainingGoals() const;
   int timeJumps() const;  ///< time jumps seen so far
+  int serverResyncs() const;  ///< timing re-synchronisations with the trajectory server so far
 
  private:
   explicit ReplanFsm(const Config& config, std::unique_ptr<TopoReplanner> replanner);
@@ -327,6 +336,7 @@ class ReplanFsm {
   double typical_step_s_ = 0.0;  // running mean of the clock's steps between calls [s]
   int time_jumps_ = 0;
   bool time_jumped_ = false;      // set by observeClockLocked, consumed by tick (replan)
+  double time_jump_clock_s_ = 0.0;  // the clock when the last jump was seen
   bool inputs_reported_ = false;  // the stale-input message was given (once per episode)
   size_t next_goal_ = 0;          // goals_[next_goal_..] are not reached yet
   Eigen::Vector3d odom_position_ = Eigen::Vector3d::Zero();
@@ -341,6 +351,8 @@ class ReplanFsm {
   int64_t next_id_ = 0;
   std::optional<ServerSetpoint> server_;  // the trajectory server's latest setpoint
   bool server_reported_ = false;          // the divergence message was given (once per episode)
+  double server_anchor_s_ = -1e300;       // the last re-anchoring on the server's hold [s]
+  int server_resyncs_ = 0;
   bool collision_ahead_ = false;  // set by checkSafety, consumed by tick
   int consecutive_failures_ = 0;
   double takeover_delay_s_;       // the adaptive takeover delay (tick() only writes it, under the mutex)

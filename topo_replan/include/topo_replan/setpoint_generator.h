@@ -7,11 +7,13 @@
 //   of the current one at that time, so the setpoints are continuous).
 // - Ordering: trajectory ids increase within one planner session; a trajectory of another session
 //   (a restarted planner, whose ids start again at 0) is accepted whatever its id.
-// - Continuity: a trajectory whose state at its take-over differs from the setpoint it would replace
-//   (the last setpoint moved on by the time since) by more than max_takeover_gap_m in position or
-//   max_takeover_velocity_gap_mps in velocity is refused at its take-over (counted, the setpoint goes
-//   on as before): the planner planned from a state the vehicle is not commanded to be in (it missed
-//   a watchdog stop, or a restarted planner started from odometry). The planner learns the commanded
+// - Continuity: a trajectory whose start state differs from the state commanded at its start time
+//   (on the trajectory, stop or hold the setpoints come from; what the planner plans from) by more
+//   than max_takeover_gap_m in position or max_takeover_velocity_gap_mps in velocity is refused at
+//   its take-over (counted; the setpoint goes on as before): the planner planned from a state the
+//   vehicle is not commanded to be in (it missed a watchdog stop, or a restarted planner started
+//   from odometry). Judged at the start time, a trajectory that arrives late (an emergency brake
+//   starting "now" at the planner) is not refused for the motion since. The planner learns the commanded
 //   setpoint from the published position command (mode, trajectory id, planner session) and plans
 //   again from it. A re-anchoring trajectory (the planner holds at the measured position after an
 //   odometry jump) is exempt: its step is deliberate.
@@ -108,6 +110,7 @@ class SetpointGenerator {
     int64_t dropped_on_watchdog = 0;    ///< queued trajectories dropped by a watchdog stop
     int64_t discontinuous_refused = 0;  ///< refused at their take-over: not continuous with the setpoint
     double last_takeover_gap_m = 0.0;   ///< position step of the last refused take-over [m]
+    double last_takeover_velocity_gap_mps = 0.0;  ///< its velocity step [m/s]
     int64_t last_refused_id = -1;       ///< its trajectory id
     double last_time_jump_s = 0.0;      ///< the last jump (new time - expected time) [s]
     double last_input_age_s = 0.0;      ///< input age when the last watchdog stop began [s]
@@ -174,6 +177,9 @@ class SetpointGenerator {
   };
 
   FlatState trajectoryState(const Entry& e, double tau) const;
+  /// The state commanded at time t (<= now) by the current source (trajectory, stop or hold); false
+  /// before the first trajectory unless a hold is streamed.
+  bool commandedAt(double t, FlatState* state) const;
   void startStop(double t0, const Entry& path, double tau0, const FlatState& state, Setpoint::Mode mode);
   static Profile1d evaluateProfile(const Stop& stop, double t);
   FlatState stopState(double t) const;
@@ -196,8 +202,8 @@ class SetpointGenerator {
   Eigen::Vector3d vehicle_position_ = Eigen::Vector3d::Zero();
   bool sampled_ = false;  // last_t_ is set
   double last_t_ = 0.0;
-  bool have_setpoint_ = false;  // last_state_ is the last sample's state (a trajectory had started)
-  FlatState last_state_;
+  double hold_since_ = 0.0;       // when the hold began [s, caller's clock]
+  bool hold_after_stop_ = false;  // the hold ends a stop (stop_ is its history)
   double last_input_t_ = -1e300;  // last heartbeat or trajectory [s, caller's clock]
   bool input_pending_ = false;    // a trajectory was added since the last sample
 };
