@@ -419,8 +419,9 @@ TEST(ReplanFsm, FliesSeededHighDensityForestsToTheirGoals) {
 }
 
 // The node's threads: the planning thread ticks while a safety thread checks and an odometry thread
-// feeds the state, all at once (run under ThreadSanitizer by make test-tsan). The outcome must be
-// that of a flight: trajectories with increasing ids and the goal reached.
+// feeds the state and the trajectory server's setpoint, all at once (run under ThreadSanitizer by
+// make test-tsan). The outcome must be that of a flight: trajectories with increasing ids and the
+// goal reached.
 TEST(ReplanFsm, TickSafetyAndOdometryFromThreeThreads) {
   Corridor c;
   c.scene.pillar(12.0, 4.0, 0.6);
@@ -436,6 +437,19 @@ TEST(ReplanFsm, TickSafetyAndOdometryFromThreeThreads) {
       const double t = clock;
       v.follow(*fsm, t);
       fsm->setOdometry(t, v.position, v.velocity);
+      // The trajectory server's setpoint (the vehicle tracks it perfectly), from the same thread.
+      if (!v.received.empty()) {
+        ServerSetpoint sp;
+        sp.stamp_s = t;
+        sp.position = v.position;
+        sp.velocity = v.velocity;
+        sp.mode = v.velocity.norm() > 0.0 ? ServerSetpoint::Mode::kTrajectory : ServerSetpoint::Mode::kHold;
+        sp.own_session = true;
+        sp.trajectory_id = v.received.back().start_time_s <= t + 1e-9 ? v.received.back().id
+                           : v.received.size() > 1 ? v.received[v.received.size() - 2].id
+                                                   : v.received.back().id;
+        fsm->setServerSetpoint(sp);
+      }
       odometry_time = t;
       std::this_thread::yield();
     }
