@@ -416,6 +416,7 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("replan/local_goal_margin_m", p.local_goal_margin_m);
   r.read("replan/max_local_goal_extension_m", p.max_local_goal_extension_m);
   r.read("replan/control_point_spacing_m", p.control_point_spacing_m);
+  r.read("replan/guide_timing_ratio", p.guide_timing_ratio);
   r.read("replan/max_search_start_offset_m", p.max_search_start_offset_m);
   r.read("replan/num_threads", p.num_threads);
   r.read("search/clearance_m", p.search.clearance_m);

@@ -52,6 +52,7 @@ bool TopoReplanner::Config::validate(std::string* why) const {
     err << "max_local_goal_extension_m must be >= 0; ";
   if (!(reference_sample_s >= 1e-4 && reference_sample_s < 1.0)) err << "reference_sample_s must be in [1e-4, 1); ";
   if (!(control_point_spacing_m > 0.0)) err << "control_point_spacing_m must be positive; ";
+  if (!(guide_timing_ratio >= 1.0) || !std::isfinite(guide_timing_ratio)) err << "guide_timing_ratio must be >= 1; ";
   if (!(max_start_velocity_step_mps >= 0.0)) err << "max_start_velocity_step_mps must be >= 0; ";
   if (!(max_search_start_offset_m >= 0.0 && max_search_start_offset_m <= 5.0))
     err << "max_search_start_offset_m must be in [0, 5]; ";
@@ -206,8 +207,53 @@ LocalProblem TopoReplanner::localProblem(const EsdfMap& map, const ReplanRequest
   if (!UniformBspline::fitToPoints(points, interval, start.velocity, start.acceleration, ref.velocity(t_g),
                                    ref.acceleration(t_g), 3, &lp.initial))
     return fail(ReplanStatus::kInvalidInput, "the reference segment could not be fitted");
+  lp.initial_length_m = seg_arc;
+  lp.goal_velocity = ref.velocity(t_g);
+  lp.goal_acceleration = ref.acceleration(t_g);
   lp.status = ReplanStatus::kSuccess;
   return lp;
+}
+
+std::optional<UniformBspline> TopoReplanner::initialAlong(const LocalProblem& lp, const Path& guide) const {
+  // A guide much longer than the reference segment (a detour round a wall, a window far aside) gets
+  // its own initial spline: along the guide, with as many control points and as much time as its
+  // length asks at the segment's mean speed. Optimised from the segment's timing instead, the
+  // detour cannot be flown in the time given, and the feasibility cost pulls it through the
+  // obstacle (every candidate failed in collision before, e.g. a goal 0.6 m behind a 3 m wall).
+  double length = 0.0;
+  for (size_t i = 1; i < guide.size(); ++i) length += (guide[i] - guide[i - 1]).norm();
+  if (guide.size() < 2 || !(lp.initial_length_m > 0.0) || length <= config_.guide_timing_ratio * lp.initial_length_m)
+    return std::nullopt;
+  const double duration = lp.initial.duration() * length / lp.initial_length_m;
+  const int segments = std::max(4, int(std::ceil(length / config_.control_point_spacing_m)));
+  const double interval = duration / segments;
+  std::vector<double> arc{0.0};
+  for (size_t i = 1; i < guide.size(); ++i) arc.push_back(arc.back() + (guide[i] - guide[i - 1]).norm());
+  // Arc length over time: a cubic from the start's speed to the local goal's (Hermite), so the fit
+  // meets its boundary velocities without a spurt of acceleration; clamped monotone.
+  const UniformBspline vel = lp.initial.derivative();
+  const double v0 = vel.evaluate(0.0).norm(), v1 = lp.goal_velocity.norm();
+  auto arcAt = [&](double u) {  // u in [0, 1]
+    const double h10 = u * u * u - 2.0 * u * u + u, h01 = -2.0 * u * u * u + 3.0 * u * u, h11 = u * u * u - u * u;
+    return h10 * duration * v0 + h01 * length + h11 * duration * v1;
+  };
+  std::vector<Eigen::Vector3d> points{lp.start};
+  size_t seg = 1;
+  double s_prev = 0.0;
+  for (int k = 1; k <= segments; ++k) {
+    const double s = std::clamp(std::max(s_prev, arcAt(double(k) / segments)), 0.0, length);
+    s_prev = s;
+    while (seg + 1 < guide.size() && arc[seg] < s) ++seg;
+    const double span = arc[seg] - arc[seg - 1];
+    const double f = span > 0.0 ? std::clamp((s - arc[seg - 1]) / span, 0.0, 1.0) : 1.0;
+    points.push_back(guide[seg - 1] + f * (guide[seg] - guide[seg - 1]));
+  }
+  points.back() = lp.goal;
+  UniformBspline out;
+  if (!UniformBspline::fitToPoints(points, interval, vel.evaluate(0.0), vel.derivative().evaluate(0.0), lp.goal_velocity,
+                                   lp.goal_acceleration, 3, &out))
+    return std::nullopt;
+  return out;
 }
 
 ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& request) {
@@ -272,6 +318,13 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
       ReplanCandidate& c = result.candidates[first + size_t(i)];
       c.guide = guides[size_t(i)];
       c.result = optimizers_[size_t(worker)].optimize(lp.initial, c.guide, map);
+      // A guide much longer than the segment that failed from the segment's timing: once more from
+      // an initial spline along the guide, timed for its length (the fast path is unchanged).
+      if (c.result.status != OptimizationStatus::kSuccess)
+        if (const std::optional<UniformBspline> along = initialAlong(lp, c.guide)) {
+          OptimizationResult second = optimizers_[size_t(worker)].optimize(*along, c.guide, map);
+          if (second.status == OptimizationStatus::kSuccess) c.result = std::move(second);
+        }
       if (c.result.status == OptimizationStatus::kSuccess) {
         c.selection_cost = c.result.cost.jerk_integral_m2ps5 + config_.duration_weight * c.result.cost.duration_s;
         // Time reallocation scaled the start velocity: restore it here, per candidate, so the choice

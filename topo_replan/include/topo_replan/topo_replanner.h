@@ -25,6 +25,7 @@
 // optimiser and writes only its own candidate; the map is only read.
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -83,6 +84,9 @@ struct LocalProblem {
   double collision_time_s = -1.0;      ///< first colliding reference time in the horizon; -1 if none
   double horizon_end_time_s = 0.0;
   UniformBspline initial;              ///< the reference segment as a cubic B-spline
+  double initial_length_m = 0.0;       ///< its arc length [m]
+  Eigen::Vector3d goal_velocity = Eigen::Vector3d::Zero();      ///< the reference's state at the local goal
+  Eigen::Vector3d goal_acceleration = Eigen::Vector3d::Zero();
 };
 
 struct ReplanCandidate {
@@ -140,6 +144,10 @@ class TopoReplanner {
     double max_local_goal_extension_m = 5.0;
     double reference_sample_s = 0.01;     ///< time step of the reference check, at least 1e-4 [s]
     double control_point_spacing_m = 0.35;  ///< initial spline: about one control point per this [m]
+    /// A guide path longer than this times the reference segment whose candidate failed from the
+    /// segment's timing is optimised again from an initial spline along the guide, timed for its
+    /// length (initialAlong).
+    double guide_timing_ratio = 1.15;
     /// Candidates whose start velocity differs from the start state's by more than this (time
     /// reallocation scaled it and the refit that restores it failed its check) are chosen only when
     /// no other candidate passed [m/s].
@@ -170,6 +178,10 @@ class TopoReplanner {
   ThreadPool pool_;
   /// The refit described in the class comment; false (trajectory unchanged) when not needed or not safe.
   bool repairStart(const FlatState& start, const EsdfMap& map, UniformBspline* trajectory) const;
+  /// An initial spline along `guide`, timed for its length, when the guide is longer than
+  /// guide_timing_ratio times the reference segment (a candidate that failed from the segment's
+  /// timing is optimised again from it); nullopt otherwise.
+  std::optional<UniformBspline> initialAlong(const LocalProblem& lp, const Path& guide) const;
 
   std::vector<PathGuidedOptimizer> optimizers_;  // one per worker
   PathGuidedOptimizer checker_;                  // final check without time reallocation
