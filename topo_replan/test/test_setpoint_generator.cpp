@@ -364,18 +364,24 @@ TEST(SetpointGenerator, EndStopContinuesStraightAndSmoothly) {
   EXPECT_NEAR(f2.sps.back().state.position.y(), -6.0 - (9.0 / 5.0 + 3.0 * 2.5 / 20.0), 1e-6);
 }
 
+// A live planner's trajectory (session, id) from the hold point p, sideways, taking over at t_start:
+// sampled until t_end, it is followed without a step.
+void resumeFromHold(SetpointGenerator* gen, const Eigen::Vector3d& p, uint64_t session, int64_t id, double t_start,
+                    double t_end) {
+  ASSERT_TRUE(gen->add(session, id, t_start, line(p, p + Eigen::Vector3d(0, 4, 0))));
+  const Flight f = fly(gen, t_start - 0.09, t_end, 100.0);
+  EXPECT_EQ(f.sps.back().mode, Mode::kTrajectory);
+  EXPECT_EQ(f.sps.back().trajectory_id, id);
+  expectSmooth(f.sps, 2.5, 0.0);
+}
+
 TEST(SetpointGenerator, NewTrajectoryTakesOverAfterAWatchdogStop) {
   SetpointGenerator gen{SetpointGenerator::Config()};
   ASSERT_TRUE(gen.add(1, 0, 0.0, constantVelocity({0, 0, 1}, {3, 0, 0}, 10.0)));
   Flight f = fly(&gen, 0.0, 3.0, 0.5);
   ASSERT_EQ(f.sps.back().mode, Mode::kHold);
-  const Eigen::Vector3d p = f.sps.back().state.position;
   // The planner is back (a restart): a new trajectory from the hold point.
-  ASSERT_TRUE(gen.add(2, 0, 3.1, line(p, p + Eigen::Vector3d(0, 4, 0))));
-  f = fly(&gen, 3.01, 5.0, 100.0);
-  EXPECT_EQ(f.sps.back().mode, Mode::kTrajectory);
-  EXPECT_EQ(f.sps.back().trajectory_id, 0);
-  expectSmooth(f.sps, 2.5, 0.0);
+  resumeFromHold(&gen, f.sps.back().state.position, 2, 0, 3.1, 5.0);
   EXPECT_EQ(gen.stats().watchdog_stops, 1);
 }
 
@@ -553,12 +559,7 @@ TEST(SetpointGenerator, AfterAWatchdogStopOnlyATrajectoryFromTheHoldTakesOver) {
   Flight g = fly(&gen, 3.01, 3.3, 100.0);
   EXPECT_EQ(g.sps.back().mode, Mode::kHold);
   EXPECT_EQ(gen.stats().discontinuous_refused, 1);
-  const Eigen::Vector3d p = g.sps.back().state.position;
-  ASSERT_TRUE(gen.add(1, 2, 3.4, line(p, p + Eigen::Vector3d(0, 4, 0))));
-  g = fly(&gen, 3.31, 4.0, 100.0);
-  EXPECT_EQ(g.sps.back().mode, Mode::kTrajectory);
-  EXPECT_EQ(g.sps.back().trajectory_id, 2);
-  expectSmooth(g.sps, 2.5, 0.0);
+  resumeFromHold(&gen, g.sps.back().state.position, 1, 2, 3.4, 4.0);
 }
 
 // --- 4. Heading target ---
