@@ -904,6 +904,7 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
     if (escape) {
       escape->id = next_id_++;
       replaceCurrentLocked(*escape);
+      consecutive_failures_ = 0;  // the escape is a new start: the tries after it are counted anew
       collision_ahead_ = false;
       event.published = true;
       event.fallback = "escape";
@@ -1023,6 +1024,9 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
       if (!goals_pending_) {
         setState(FsmState::kWaitTarget, &out, "stopped, no mission");
       } else if (startGoalsLocked(t, map, &out)) {
+        // A new reference from rest is a new strategy: it gets its own max_plan_failures tries (the
+        // failures of the replans that led here do not count against it).
+        consecutive_failures_ = 0;
         plan(t, map, FsmEvent::Trigger::kRetry, &lock, &out, now);
       } else {
         setState(FsmState::kWaitTarget, &out, "stopped, the mission's goals are no longer valid");

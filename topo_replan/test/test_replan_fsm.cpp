@@ -270,6 +270,19 @@ TEST(ReplanFsm, StopsBeforeAWallWithNoWayAround) {
   EXPECT_LT(log.flown.back().x(), 11.0 - config.safety_clearance_m);
   EXPECT_EQ(fsm->state(), FsmState::kWaitTarget);
   expectContinuous(log.trajectories);
+  // Stopped, it tried a new reference from rest max_plan_failures times before giving up: the
+  // failed replans before the stop do not count against it (they used to, and a flight of
+  // make bench-flight gave its mission up after a single try from rest).
+  size_t last_brake = 0;
+  for (size_t i = 0; i < log.events.size(); ++i)
+    if (log.events[i].trigger == FsmEvent::Trigger::kEmergency) last_brake = i;
+  int tries = 0, give_ups = 0;
+  for (size_t i = last_brake + 1; i < log.events.size(); ++i) {
+    tries += log.events[i].fallback == "hover_retry" || log.events[i].fallback == "give_up";
+    give_ups += log.events[i].fallback == "give_up";
+  }
+  EXPECT_EQ(tries, config.max_plan_failures);
+  EXPECT_EQ(give_ups, 1);
 }
 
 // An obstacle revealed so late that braking at the planner's limit cannot stop before it: the
