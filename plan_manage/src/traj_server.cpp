@@ -96,8 +96,8 @@ void TrajServer::logEvents(const SetpointGenerator::Stats& before, const Setpoin
   if (after.discontinuous_refused > before.discontinuous_refused)
     ROS_WARN_THROTTLE(1.0,
                       "traj_server: trajectory %ld refused at its take-over: it starts %.2f m and %.2f m/s from "
-                      "the commanded state (limits %.2f m, %.2f m/s): the planner replans from the published "
-                      "setpoint (%ld refused so far)",
+                      "the commanded state (limits %.2f m, %.2f m/s); a moving vehicle stops along its current "
+                      "path, and the planner replans from the hold (%ld refused so far)",
                       long(after.last_refused_id), after.last_takeover_gap_m, after.last_takeover_velocity_gap_mps,
                       g.max_takeover_gap_m, g.max_takeover_velocity_gap_mps, long(after.discontinuous_refused));
   if (after.end_stops > before.end_stops)

@@ -241,8 +241,9 @@ SetpointGenerator::Profile1d SetpointGenerator::evaluateProfile(const Stop& s, d
   return p;
 }
 
-FlatState SetpointGenerator::stopState(double t) const {
-  const Stop& s = stop_;
+FlatState SetpointGenerator::stopState(double t) const { return stopStateOf(stop_, t); }
+
+FlatState SetpointGenerator::stopStateOf(const Stop& s, double t) const {
   if (s.follow_trajectory) return trajectoryState(s.path, s.tau0 + std::clamp(t - s.t0, 0.0, s.t1));
   const Profile1d prof = evaluateProfile(s, t - s.t0);
   FlatState out;
@@ -296,6 +297,18 @@ bool SetpointGenerator::commandedAt(double t, FlatState* state) const {
     *state = FlatState::atRest(vehicle_position_);
     return true;
   }
+  if (t < current_.start && before_.valid) {
+    // Before the current trajectory took over: what it replaced.
+    if (before_.mode == Setpoint::Mode::kHold) {
+      *state = FlatState::atRest(before_.hold_position);
+    } else if (before_.mode == Setpoint::Mode::kTrajectory) {
+      const double d = before_.trajectory.pos.duration();
+      *state = trajectoryState(before_.trajectory, std::clamp(t - before_.trajectory.start, 0.0, d));
+    } else {
+      *state = stopStateOf(before_.stop, std::clamp(t, before_.stop.t0, before_.stop.t0 + before_.stop.duration()));
+    }
+    return true;
+  }
   if (mode_ == Setpoint::Mode::kHold && t >= hold_since_) {
     *state = FlatState::atRest(hold_position_);
     return true;
@@ -338,6 +351,7 @@ bool SetpointGenerator::sample(double t, Setpoint* out) {
   // The newest queued trajectory whose start has come takes over (also from a stop or a hold), if it
   // starts from the state commanded at its start time (what the planner plans from: its takeover
   // state; judged at the start time, so a late arrival, e.g. an emergency brake, is not refused).
+  bool refused_now = false;
   while (!queue_.empty() && queue_.front().start <= t) {
     Entry next = std::move(queue_.front());
     queue_.pop_front();
@@ -351,12 +365,35 @@ bool SetpointGenerator::sample(double t, Setpoint* out) {
         stats_.last_takeover_gap_m = gap;
         stats_.last_takeover_velocity_gap_mps = velocity_gap;
         stats_.last_refused_id = next.id;
+        refused_now = true;
         continue;
       }
+    }
+    if (active_) {
+      before_.valid = true;
+      before_.mode = mode_;
+      if (mode_ == Setpoint::Mode::kTrajectory) before_.trajectory = current_;
+      if (mode_ == Setpoint::Mode::kEndStop || mode_ == Setpoint::Mode::kWatchdogStop ||
+          (mode_ == Setpoint::Mode::kHold && hold_after_stop_ && next.start < hold_since_)) {
+        before_.mode = Setpoint::Mode::kWatchdogStop;  // (any stop)
+        before_.stop = stop_;
+      }
+      before_.hold_position = hold_position_;
     }
     current_ = std::move(next);
     active_ = true;
     mode_ = Setpoint::Mode::kTrajectory;
+  }
+  if (refused_now && active_ && mode_ == Setpoint::Mode::kTrajectory) {
+    // The planner replaced this trajectory (it may be the one it stopped for): stop along its path now
+    // instead of flying it on unchecked; the planner plans from the hold.
+    const double tau = std::clamp(t - current_.start, 0.0, current_.pos.duration());
+    const FlatState state = trajectoryState(current_, tau);
+    if (state.velocity.norm() > config_.moving_speed_mps) {
+      ++stats_.refusal_stops;
+      queue_.clear();
+      startStop(t, current_, tau, state, Setpoint::Mode::kWatchdogStop);
+    }
   }
   Setpoint sp;
   if (!active_) {

@@ -502,9 +502,10 @@ TEST(SetpointGenerator, ALateBrakeIsJudgedAtItsStartTime) {
 
 // --- 5. Continuity at the take-over ---
 
-// A trajectory that does not start from the setpoint it replaces (a planner that missed a watchdog
-// stop, or planned from odometry) is refused at its take-over: the setpoint goes on along the current
-// one. A re-anchoring trajectory (odometry jump) and a continuous one take over.
+// A trajectory that does not start from the state commanded at its start time (a planner that missed
+// a watchdog stop, or planned from odometry) is refused at its take-over, and the server stops
+// smoothly along its current path (the planner replaced that trajectory: nobody checks it now). A
+// trajectory from the commanded state takes over (here from the stop); so does a re-anchoring one.
 TEST(SetpointGenerator, RefusesATakeoverThatWouldStepTheSetpoint) {
   SetpointGenerator gen{SetpointGenerator::Config()};
   const UniformBspline a = constantVelocity({0, 0, 1}, {3, 0, 0}, 10.0);
@@ -520,24 +521,30 @@ TEST(SetpointGenerator, RefusesATakeoverThatWouldStepTheSetpoint) {
     }
   };
   run(100);
-  // 0.3 m beside the setpoint: refused.
+  // 0.3 m beside the setpoint: refused, and the server stops along a's path.
   ASSERT_TRUE(gen.add(1, 1, 1.05, constantVelocity(a.evaluate(1.05) + Eigen::Vector3d(0, 0.3, 0), {3, 0, 0}, 2.0)));
   run(20);
   EXPECT_EQ(sp.trajectory_id, 0);
+  EXPECT_EQ(sp.mode, Mode::kWatchdogStop);
   EXPECT_EQ(gen.stats().discontinuous_refused, 1);
+  EXPECT_EQ(gen.stats().refusal_stops, 1);
   EXPECT_EQ(gen.stats().last_refused_id, 1);
   EXPECT_NEAR(gen.stats().last_takeover_gap_m, 0.3, 0.01);
-  // Right position, velocity stepping by 1 m/s: refused too.
-  ASSERT_TRUE(gen.add(1, 2, 1.35, constantVelocity(a.evaluate(1.35), {2, 0, 0}, 2.0)));
-  run(20);
-  EXPECT_EQ(sp.trajectory_id, 0);
-  EXPECT_EQ(gen.stats().discontinuous_refused, 2);
-  expectSmooth(sps, 2.5, 0.0);
-  // Continuous: taken over.
-  ASSERT_TRUE(gen.add(1, 3, 1.45, constantVelocity(a.evaluate(1.45), {3, 0, 0}, 2.0)));
+  EXPECT_LT(std::abs(sp.state.position.y()), 1e-9);  // on a's path
+  expectSmooth(sps, 2.5, 10.0);
+  // From the commanded (stopping) state of the last sample, on at its velocity: taken over.
+  const double t_last = t - kDt;
+  ASSERT_TRUE(gen.add(1, 2, t_last, constantVelocity(sp.state.position, sp.state.velocity, 2.0)));
   run(10);
-  EXPECT_EQ(sp.trajectory_id, 3);
-  expectSmooth(sps, 2.5, 0.0);
+  EXPECT_EQ(sp.trajectory_id, 2);
+  EXPECT_EQ(sp.mode, Mode::kTrajectory);
+  // Right position, velocity stepping by 1 m/s: refused too (a second stop).
+  const Eigen::Vector3d v = sp.state.velocity;
+  ASSERT_TRUE(gen.add(1, 3, t - kDt, constantVelocity(sp.state.position, v - Eigen::Vector3d(1, 0, 0), 2.0)));
+  run(10);
+  EXPECT_EQ(sp.trajectory_id, 2);
+  EXPECT_EQ(gen.stats().discontinuous_refused, 2);
+  EXPECT_EQ(gen.stats().refusal_stops, 2);
   // A re-anchoring one 0.5 m away: taken over (the step is the odometry's).
   const Eigen::Vector3d measured = sp.state.position + Eigen::Vector3d(0, 0.5, 0);
   ASSERT_TRUE(gen.add(1, 4, t, line(measured, measured), std::nullopt, /*reanchor=*/true));
@@ -545,6 +552,36 @@ TEST(SetpointGenerator, RefusesATakeoverThatWouldStepTheSetpoint) {
   EXPECT_EQ(sp.trajectory_id, 4);
   EXPECT_LT((sp.state.position - measured).norm(), 1e-9);
   EXPECT_EQ(gen.stats().discontinuous_refused, 2);
+}
+
+// The planner brakes from the trajectory it still flies while its next plan waits for its take-over;
+// the brake reaches the server after that plan took over there. Judged on the trajectory the plan
+// replaced (what was commanded at the brake's start), it is accepted. (Judged on the plan clamped to
+// its start it was refused, 0.13 m off, and a max_vel 4 flight collided.)
+TEST(SetpointGenerator, ABrakeStartingBeforeTheCurrentTakeoverIsJudgedOnWhatItReplaced) {
+  SetpointGenerator gen{SetpointGenerator::Config()};
+  const UniformBspline a = constantVelocity({0, 0, 1}, {3, 0, 0}, 10.0);
+  ASSERT_TRUE(gen.add(1, 0, 0.0, a));
+  ASSERT_TRUE(gen.add(1, 1, 1.0, constantVelocity(a.evaluate(1.0), {3, 0, 0}, 3.0)));
+  Setpoint sp;
+  double t = 0.0;
+  for (; t < 1.025; t += kDt) {
+    gen.noteHeartbeat(t);
+    ASSERT_TRUE(gen.sample(t, &sp));
+  }
+  ASSERT_EQ(sp.trajectory_id, 1);
+  // The brake from a's state at 0.95 s, at 5 m/s^2.
+  const double h = 0.05, v0 = 3.0, acc = 5.0;
+  std::vector<Eigen::Vector3d> pts;
+  for (double s = 0.0; s <= v0 / acc + 1e-9; s += h) pts.push_back(a.evaluate(0.95) + Eigen::Vector3d(v0 * s - 0.5 * acc * s * s, 0, 0));
+  UniformBspline brake;
+  ASSERT_TRUE(UniformBspline::fitToPoints(pts, h, Eigen::Vector3d(v0, 0, 0), Eigen::Vector3d(-acc, 0, 0),
+                                          Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), 3, &brake));
+  ASSERT_TRUE(gen.add(1, 2, 0.95, brake));
+  gen.noteHeartbeat(t);
+  ASSERT_TRUE(gen.sample(t, &sp));
+  EXPECT_EQ(sp.trajectory_id, 2);
+  EXPECT_EQ(gen.stats().discontinuous_refused, 0);
 }
 
 // After a watchdog stop, the silent planner's trajectory from where it believes the vehicle is (on

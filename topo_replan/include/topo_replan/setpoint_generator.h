@@ -13,7 +13,10 @@
 //   its take-over (counted; the setpoint goes on as before): the planner planned from a state the
 //   vehicle is not commanded to be in (it missed a watchdog stop, or a restarted planner started
 //   from odometry). Judged at the start time, a trajectory that arrives late (an emergency brake
-//   starting "now" at the planner) is not refused for the motion since. The planner learns the commanded
+//   starting "now" at the planner) is not refused for the motion since; one that starts before the
+//   current trajectory took over is judged on the source that one replaced. A refusal while moving
+//   starts the smooth stop along the current path at once (the planner replaced that trajectory, so
+//   it is no longer checked; the planner then plans from the hold). The planner learns the commanded
 //   setpoint from the published position command (mode, trajectory id, planner session) and plans
 //   again from it. A re-anchoring trajectory (the planner holds at the measured position after an
 //   odometry jump) is exempt: its step is deliberate.
@@ -109,6 +112,7 @@ class SetpointGenerator {
     int64_t forward_time_jumps = 0;
     int64_t dropped_on_watchdog = 0;    ///< queued trajectories dropped by a watchdog stop
     int64_t discontinuous_refused = 0;  ///< refused at their take-over: not continuous with the setpoint
+    int64_t refusal_stops = 0;          ///< smooth stops started by such a refusal
     double last_takeover_gap_m = 0.0;   ///< position step of the last refused take-over [m]
     double last_takeover_velocity_gap_mps = 0.0;  ///< its velocity step [m/s]
     int64_t last_refused_id = -1;       ///< its trajectory id
@@ -177,9 +181,12 @@ class SetpointGenerator {
   };
 
   FlatState trajectoryState(const Entry& e, double tau) const;
-  /// The state commanded at time t (<= now) by the current source (trajectory, stop or hold); false
-  /// before the first trajectory unless a hold is streamed.
+  /// The state commanded at time t (<= now): by the current source (trajectory, stop or hold), or
+  /// before the current trajectory's start by the one it replaced; false before the first trajectory
+  /// unless a hold is streamed.
   bool commandedAt(double t, FlatState* state) const;
+  /// The state of a stop at t (clamped to its duration).
+  FlatState stopStateOf(const Stop& stop, double t) const;
   void startStop(double t0, const Entry& path, double tau0, const FlatState& state, Setpoint::Mode mode);
   static Profile1d evaluateProfile(const Stop& stop, double t);
   FlatState stopState(double t) const;
@@ -191,6 +198,16 @@ class SetpointGenerator {
   std::deque<Entry> queue_;
   bool active_ = false;
   Entry current_{};
+  // The source the current trajectory replaced (what was commanded before its start time): a take-over
+  // that starts before it (a brake built on the trajectory the planner still flew) is judged on it.
+  struct Before {
+    bool valid = false;
+    Setpoint::Mode mode = Setpoint::Mode::kTrajectory;  // kTrajectory, a stop, or kHold
+    Entry trajectory;
+    Stop stop;
+    Eigen::Vector3d hold_position = Eigen::Vector3d::Zero();
+  };
+  Before before_;
   Setpoint::Mode mode_ = Setpoint::Mode::kTrajectory;
   Stop stop_;
   Eigen::Vector3d hold_position_ = Eigen::Vector3d::Zero();
