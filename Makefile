@@ -27,7 +27,7 @@ build: deps
 # Builds and runs every gtest and rostest, then prints `N passed, N failed`.
 test: build
 	@rm -rf $(WS)/build/test_results
-	cd $(WS) && . devel/setup.sh && catkin_make -j$(JOBS) $(CATKIN_ARGS) run_tests
+	cd $(WS) && catkin_make -j$(JOBS) $(CATKIN_ARGS) run_tests
 	@/usr/bin/python3 scripts/test_summary.py $(WS)/build/test_results
 
 bench: bench-env bench-topo bench-replan bench-opt bench-camera
@@ -89,17 +89,17 @@ bench-faults: build
 test-asan: deps
 	$(call make_ws,$(ROOT)/build/ws_asan)
 	@rm -rf build/ws_asan/build/test_results
-	cd build/ws_asan && catkin_make -j$(JOBS) -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-	  -DTOPO_PLANNER_SANITIZE=address,undefined && . devel/setup.sh && \
-	  UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 ASAN_OPTIONS=detect_leaks=1 catkin_make -j$(JOBS) run_tests
+	cd build/ws_asan && UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 ASAN_OPTIONS=detect_leaks=1 \
+	  catkin_make -j$(JOBS) -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	  -DTOPO_PLANNER_SANITIZE=address,undefined run_tests
 	@/usr/bin/python3 scripts/test_summary.py $(ROOT)/build/ws_asan/build/test_results
 
 test-tsan: deps
 	$(call make_ws,$(ROOT)/build/ws_tsan)
 	@rm -rf build/ws_tsan/build/test_results
-	cd build/ws_tsan && catkin_make -j$(JOBS) -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-	  -DTOPO_PLANNER_SANITIZE=thread && . devel/setup.sh && \
-	  TSAN_OPTIONS="halt_on_error=1 suppressions=$(ROOT)/scripts/tsan.supp" catkin_make -j$(JOBS) run_tests
+	cd build/ws_tsan && TSAN_OPTIONS="halt_on_error=1 suppressions=$(ROOT)/scripts/tsan.supp" \
+	  catkin_make -j$(JOBS) -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	  -DTOPO_PLANNER_SANITIZE=thread run_tests
 	@/usr/bin/python3 scripts/test_summary.py $(ROOT)/build/ws_tsan/build/test_results
 
 clean:
