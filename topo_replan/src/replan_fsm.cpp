@@ -239,14 +239,9 @@ bool ReplanFsm::followServerLocked(double t, const EsdfMap& map, FsmOutput* out)
   // A setpoint sampled before this FSM's last re-anchoring predates it: nothing new.
   if (sp.stamp_s <= server_anchor_s_) return false;
   const double grace = config_.server_grace_s;
-  // The trajectory of ours the server should follow at its stamp: the current one once its start
-  // (plus the message latency) has passed, the one it replaced until then.
-  const ExecTrajectory* expected = nullptr;
-  bool settled = false;  // the current one has started long enough ago that the server must be on it
-  if (current_) {
-    settled = sp.stamp_s >= current_->start_time_s + grace;
-    expected = &*current_;
-  }
+  // The server should follow the current trajectory once its start (plus the message latency) has
+  // passed ("settled"), the one it replaced until then.
+  const bool settled = current_ && sp.stamp_s >= current_->start_time_s + grace;
   std::string why;
   if (sp.mode == ServerSetpoint::Mode::kStopping) {
     why = "it stops on its own (watchdog or end stop)";
@@ -284,7 +279,7 @@ bool ReplanFsm::followServerLocked(double t, const EsdfMap& map, FsmOutput* out)
         }
       }
     }
-  } else if (sp.mode == ServerSetpoint::Mode::kHold && expected && settled) {
+  } else if (sp.mode == ServerSetpoint::Mode::kHold && settled) {
     const FlatState commanded = takeoverStateLocked(sp.stamp_s);
     if (commanded.velocity.norm() > config_.stopped_speed_mps)
       why = "it holds while the commanded trajectory moves";

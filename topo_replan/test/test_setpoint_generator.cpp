@@ -56,6 +56,17 @@ UniformBspline cruiseThenBrake(const Eigen::Vector3d& p0, double cruise_s) {
   return UniformBspline(q, 3, h);
 }
 
+// A cubic braking along +x from p0 at speed v0 with constant deceleration acc to rest.
+UniformBspline brakeAlongX(const Eigen::Vector3d& p0, double v0, double acc) {
+  const double h = 0.05;
+  std::vector<Eigen::Vector3d> pts;
+  for (double s = 0.0; s <= v0 / acc + 1e-9; s += h) pts.push_back(p0 + Eigen::Vector3d(v0 * s - 0.5 * acc * s * s, 0, 0));
+  UniformBspline brake;
+  EXPECT_TRUE(UniformBspline::fitToPoints(pts, h, Eigen::Vector3d(v0, 0, 0), Eigen::Vector3d(-acc, 0, 0),
+                                          Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), 3, &brake));
+  return brake;
+}
+
 bool stopping(Mode m) { return m == Mode::kEndStop || m == Mode::kWatchdogStop; }
 
 // Setpoints sampled every kDt never jump: each position step is within the speed times the period
@@ -486,14 +497,8 @@ TEST(SetpointGenerator, ALateBrakeIsJudgedAtItsStartTime) {
     gen.noteHeartbeat(t);
     ASSERT_TRUE(gen.sample(t, &sp));
   }
-  // Braking at 5 m/s^2 from (a at 1.0): control points of a constant deceleration.
-  const double h = 0.05, v0 = 3.0, acc = 5.0;
-  std::vector<Eigen::Vector3d> pts;
-  for (double s = 0.0; s <= v0 / acc + 1e-9; s += h) pts.push_back(a.evaluate(1.0) + Eigen::Vector3d(v0 * s - 0.5 * acc * s * s, 0, 0));
-  UniformBspline brake;
-  ASSERT_TRUE(UniformBspline::fitToPoints(pts, h, Eigen::Vector3d(v0, 0, 0), Eigen::Vector3d(-acc, 0, 0),
-                                          Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), 3, &brake));
-  ASSERT_TRUE(gen.add(1, 1, 1.0, brake));
+  // Braking at 5 m/s^2 from (a at 1.0).
+  ASSERT_TRUE(gen.add(1, 1, 1.0, brakeAlongX(a.evaluate(1.0), 3.0, 5.0)));
   gen.noteHeartbeat(t);
   ASSERT_TRUE(gen.sample(t, &sp));
   EXPECT_EQ(sp.trajectory_id, 1);
@@ -571,13 +576,7 @@ TEST(SetpointGenerator, ABrakeStartingBeforeTheCurrentTakeoverIsJudgedOnWhatItRe
   }
   ASSERT_EQ(sp.trajectory_id, 1);
   // The brake from a's state at 0.95 s, at 5 m/s^2.
-  const double h = 0.05, v0 = 3.0, acc = 5.0;
-  std::vector<Eigen::Vector3d> pts;
-  for (double s = 0.0; s <= v0 / acc + 1e-9; s += h) pts.push_back(a.evaluate(0.95) + Eigen::Vector3d(v0 * s - 0.5 * acc * s * s, 0, 0));
-  UniformBspline brake;
-  ASSERT_TRUE(UniformBspline::fitToPoints(pts, h, Eigen::Vector3d(v0, 0, 0), Eigen::Vector3d(-acc, 0, 0),
-                                          Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), 3, &brake));
-  ASSERT_TRUE(gen.add(1, 2, 0.95, brake));
+  ASSERT_TRUE(gen.add(1, 2, 0.95, brakeAlongX(a.evaluate(0.95), 3.0, 5.0)));
   gen.noteHeartbeat(t);
   ASSERT_TRUE(gen.sample(t, &sp));
   EXPECT_EQ(sp.trajectory_id, 2);
