@@ -33,6 +33,7 @@ std::unique_ptr<PlannerServer> PlannerServer::create(const ros::NodeHandle& nh, 
   s.bspline_pub_ = pnh.advertise<Bspline>("bspline", 10);
   s.event_pub_ = pnh.advertise<ReplanEvent>("replan_event", 100);
   s.reference_pub_ = pnh.advertise<nav_msgs::Path>("reference_path", 1, true);
+  s.route_pub_ = pnh.advertise<nav_msgs::Path>("global_route", 1, true);
   s.traj_vis_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("vis/trajectory", 5);
   s.candidates_vis_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("vis/candidates", 5);
   s.guides_vis_pub_ = pnh.advertise<visualization_msgs::MarkerArray>("vis/guide_paths", 5);
@@ -215,6 +216,7 @@ void PlannerServer::safetyTimer(const ros::TimerEvent&) {
 void PlannerServer::handle(const FsmOutput& out) {
   if (!out.message.empty()) ROS_INFO("planner: %s", out.message.c_str());
   if (out.new_reference) publishReference();
+  if (out.new_route) publishRoute();
   if (out.trajectory) bspline_pub_.publish(toMsg(*out.trajectory, config_.frame_id, session_));
   if (out.event) {
     const FsmEvent& e = *out.event;
@@ -226,6 +228,7 @@ void PlannerServer::handle(const FsmOutput& out) {
     msg.trigger = toString(e.trigger);
     msg.status = toString(e.status);
     msg.fallback = e.fallback;
+    msg.message = e.message;
     msg.position.x = e.position.x(), msg.position.y = e.position.y(), msg.position.z = e.position.z();
     msg.total_ms = e.stats.total_ms;
     msg.search_ms = e.stats.search_ms;
@@ -237,6 +240,8 @@ void PlannerServer::handle(const FsmOutput& out) {
       ROS_WARN_THROTTLE(1.0, "planner: %s plan discarded (%s): %s", toString(e.trigger), e.fallback.c_str(),
                         e.fallback == "discarded_late" ? "it finished after its takeover time"
                                                        : "a braking trajectory took over while planning");
+    else if (e.fallback == "give_up")
+      ROS_ERROR("planner: %s", e.message.c_str());
     else if (!e.published)
       ROS_WARN_THROTTLE(1.0, "planner: %s plan failed: %s (%s); fallback %s", toString(e.trigger), toString(e.status),
                         e.message.c_str(), e.fallback.c_str());
@@ -247,6 +252,20 @@ void PlannerServer::handle(const FsmOutput& out) {
   else if (out.trajectory) publishPlanMarkers(ReplanResult(), &*out.trajectory);
   if (out.goal_reached) ROS_INFO("planner: goal reached");
   if (out.odometry_jumped && config_.clear_map_on_odom_jump) mapping_->clearMap("the odometry jumped");
+}
+
+void PlannerServer::publishRoute() {
+  nav_msgs::Path path;
+  path.header.stamp = ros::Time::now();
+  path.header.frame_id = config_.frame_id;
+  for (const Eigen::Vector3d& p : fsm_->route()) {
+    geometry_msgs::PoseStamped pose;
+    pose.header = path.header;
+    pose.pose.position.x = p.x(), pose.pose.position.y = p.y(), pose.pose.position.z = p.z();
+    pose.pose.orientation.w = 1.0;
+    path.poses.push_back(pose);
+  }
+  route_pub_.publish(path);
 }
 
 void PlannerServer::publishReference() {
@@ -389,6 +408,21 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("fsm/server_grace_s", f.server_grace_s);
   r.read("fsm/server_position_tolerance_m", f.server_position_tolerance_m);
   r.read("fsm/waypoint_reached_radius_m", f.waypoint_reached_radius_m);
+  r.read("fsm/reroute_after_failures", f.reroute_after_failures);
+  r.read("fsm/backoff_length_m", f.backoff_length_m);
+  r.read("fsm/max_backoff_length_m", f.max_backoff_length_m);
+  r.read("fsm/backoff_speed_mps", f.backoff_speed_mps);
+  r.read("fsm/max_backoffs", f.max_backoffs);
+  r.read("fsm/mission_timeout_s", f.mission_timeout_s);
+  r.read("route/enabled", f.global_route);
+  r.read("route/cell_voxels", f.route.cell_voxels);
+  r.read("route/preferred_clearance_m", f.route.preferred_clearance_m);
+  r.read("route/clearance_weight", f.route.clearance_weight);
+  r.read("route/heuristic_weight", f.route.heuristic_weight);
+  r.read("route/min_z_m", f.route.min_z_m);
+  r.read("route/max_z_m", f.route.max_z_m);
+  r.read("route/end_clearance_m", f.route.end_clearance_m);
+  r.read("route/max_expansions", f.route.max_expansions);
 
   // Limits: the optimiser's are the vehicle's; the reference flies below them (reference_speed_ratio)
   // so detours around obstacles need no time stretching.
@@ -435,6 +469,11 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("optimizer/max_time_s", p.optimizer.max_time_s);
   r.read("optimizer/lambda_collision", p.optimizer.l2c);
   p.astar.clearance_m = p.search.clearance_m;
+  // The route keeps the guide search's clearance and its view of unknown space unless told otherwise.
+  f.route.clearance_m = p.search.clearance_m;
+  f.route.unknown_is_free = p.search.unknown_is_free;
+  r.read("route/clearance_m", f.route.clearance_m);
+  r.read("route/unknown_is_free", f.route.unknown_is_free);
 
   std::string why;
   std::string range;

@@ -98,6 +98,8 @@ const char* toString(GoalStatus status) {
     case GoalStatus::kGoalOutOfMap: return "kGoalOutOfMap";
     case GoalStatus::kReferenceFailed: return "kReferenceFailed";
     case GoalStatus::kInputsStale: return "kInputsStale";
+    case GoalStatus::kUnreachable: return "kUnreachable";
+    case GoalStatus::kGivenUp: return "kGivenUp";
   }
   return "unknown";
 }
@@ -110,6 +112,7 @@ const char* toString(FsmEvent::Trigger trigger) {
     case FsmEvent::Trigger::kRetry: return "retry";
     case FsmEvent::Trigger::kEmergency: return "emergency";
     case FsmEvent::Trigger::kTimeJump: return "time_jump";
+    case FsmEvent::Trigger::kReroute: return "reroute";
   }
   return "unknown";
 }
@@ -143,6 +146,13 @@ bool ReplanFsm::Config::validate(std::string* why) const {
   if (!(goal_tolerance_m > 0.0) || !std::isfinite(goal_tolerance_m)) return bad("goal_tolerance_m must be positive");
   if (!(stopped_speed_mps > 0.0) || !std::isfinite(stopped_speed_mps)) return bad("stopped_speed_mps must be positive");
   if (max_plan_failures < 1) return bad("max_plan_failures must be >= 1");
+  if (!route.validate(&sub)) return bad(sub);
+  if (reroute_after_failures < 1) return bad("reroute_after_failures must be >= 1");
+  if (!(backoff_length_m >= 0.0) || !(max_backoff_length_m >= backoff_length_m) || !(max_backoff_length_m <= 20.0))
+    return bad("backoff lengths must satisfy 0 <= backoff_length_m <= max_backoff_length_m <= 20");
+  if (max_backoffs < 0) return bad("max_backoffs must be >= 0");
+  if (!(backoff_speed_mps > 0.0) || !std::isfinite(backoff_speed_mps)) return bad("backoff_speed_mps must be positive");
+  if (!(mission_timeout_s >= 0.0) || std::isnan(mission_timeout_s)) return bad("mission_timeout_s must be >= 0 (0: automatic)");
   if (!(known_start_radius_m >= 0.0) || !(known_start_radius_m <= 2.0)) return bad("known_start_radius_m must be in [0, 2]");
   if (!(commit_margin_m >= 0.0) || !(commit_margin_m <= 5.0)) return bad("commit_margin_m must be in [0, 5]");
   if (!(depth_timeout_s >= 0.0) || !std::isfinite(depth_timeout_s)) return bad("depth_timeout_s must be >= 0 (0: not required)");
@@ -173,7 +183,15 @@ std::unique_ptr<ReplanFsm> ReplanFsm::create(const Config& config, std::string* 
 }
 
 ReplanFsm::ReplanFsm(const Config& config, std::unique_ptr<TopoReplanner> replanner)
-    : config_(config), replanner_(std::move(replanner)), takeover_delay_s_(config.takeover_delay_s) {}
+    : config_(config),
+      replanner_(std::move(replanner)),
+      router_(std::make_unique<GlobalRouter>(config.route)),
+      tight_router_(std::make_unique<GlobalRouter>([&] {
+        GlobalRouter::Config tight = config.route;
+        tight.clearance_m = tight.end_clearance_m;
+        return tight;
+      }())),
+      takeover_delay_s_(config.takeover_delay_s) {}
 
 FsmState ReplanFsm::state() const {
   std::lock_guard<std::mutex> lock(mutex_);
@@ -407,6 +425,7 @@ void ReplanFsm::observeClockLocked(double now, FsmOutput* out) {
   shiftOld(&depth_arrival_s_);
   if (server_) shiftOld(&server_->stamp_s);
   shiftOld(&server_anchor_s_);
+  mission_start_s_ += shift;  // read from this clock
   last_clock_s_ = now;
   ++time_jumps_;
   time_jumped_ = true;
@@ -433,6 +452,11 @@ std::vector<Eigen::Vector3d> ReplanFsm::remainingGoals() const {
   return remainingGoalsLocked();
 }
 
+Path ReplanFsm::route() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return route_;
+}
+
 GoalStatus ReplanFsm::setGoals(const std::vector<Eigen::Vector3d>& goals) {
   std::lock_guard<std::mutex> lock(mutex_);
   if (goals.empty()) return last_goal_status_ = GoalStatus::kInvalidInput;
@@ -443,6 +467,9 @@ GoalStatus ReplanFsm::setGoals(const std::vector<Eigen::Vector3d>& goals) {
   if (!have_clock_ || !inputsFreshLocked(last_clock_s_, &why)) return last_goal_status_ = GoalStatus::kInputsStale;
   pending_goals_ = goals;
   goals_pending_ = true;
+  new_mission_ = true;
+  rerouting_ = false;
+  route_stale_ = true;
   return GoalStatus::kAccepted;
 }
 
@@ -710,11 +737,59 @@ std::optional<ExecTrajectory> ReplanFsm::escapeTrajectoryLocked(double t, const 
               " m within " + std::to_string(config_.max_escape_length_m) + " m (from " + std::to_string(d0) + " m)";
     return std::nullopt;
   }
+  std::optional<ExecTrajectory> escape = restToRestLocked(walk, t, map, d0, config_.escape_speed_mps, "escape", report);
+  if (!escape || !report->empty()) return escape;
+  char text[160];
+  std::snprintf(text, sizeof(text), "escape: %.2f m up the distance field from %.2f m to %.2f m clearance in %.1f s",
+                pathLength(walk), d0, d_end, escape->spline.duration());
+  *report = text;
+  return escape;
+}
+
+std::optional<ExecTrajectory> ReplanFsm::backoffTrajectoryLocked(double t, const EsdfMap& map,
+                                                                 std::string* report) const {
+  const Eigen::Vector3d p0 = takeoverStateLocked(t).position;
+  double d0 = 0.0;
+  if (!map.interpolate(p0, &d0, nullptr)) {
+    *report = "no back-off: the vehicle is outside the map";
+    return std::nullopt;
+  }
+  // Back along the flown path (newest first) until backoff_length_m is flown and the point keeps
+  // escape_clearance_m, or max_backoff_length_m.
+  std::vector<Eigen::Vector3d> walk{p0};
+  double length = 0.0, d_end = d0;
+  for (auto it = flown_.rbegin(); it != flown_.rend(); ++it) {
+    const double step = (*it - walk.back()).norm();
+    if (step < 0.05) continue;
+    if (length + step > config_.max_backoff_length_m) break;
+    walk.push_back(*it);
+    length += step;
+    if (!map.interpolate(*it, &d_end, nullptr)) d_end = -INFINITY;
+    if (length >= config_.backoff_length_m && d_end >= config_.escape_clearance_m) break;
+  }
+  if (length < std::min(0.3, config_.backoff_length_m) || walk.size() < 2) {
+    *report = "no back-off: no flown path to go back along";
+    return std::nullopt;
+  }
+  std::optional<ExecTrajectory> backoff = restToRestLocked(walk, t, map, d0, config_.backoff_speed_mps, "back-off", report);
+  if (!backoff || !report->empty()) return backoff;
+  char text[160];
+  std::snprintf(text, sizeof(text), "back-off: %.2f m back along the flown path, from %.2f m to %.2f m clearance in %.1f s",
+                length, d0, d_end, backoff->spline.duration());
+  *report = text;
+  return backoff;
+}
+
+std::optional<ExecTrajectory> ReplanFsm::restToRestLocked(const std::vector<Eigen::Vector3d>& walk, double t,
+                                                          const EsdfMap& map, double d0, double speed_mps,
+                                                          const char* what, std::string* report) const {
+  report->clear();
+  const Eigen::Vector3d p0 = walk.front();
   std::vector<double> arc{0.0};
   for (size_t i = 1; i < walk.size(); ++i) arc.push_back(arc.back() + (walk[i] - walk[i - 1]).norm());
   const double length = arc.back();
   // Rest to rest along the walk with a smoothstep s(u) = L (3u^2 - 2u^3), whose peak speed is 1.5 L / T.
-  const double T = std::max(0.5, 1.5 * length / config_.escape_speed_mps);
+  const double T = std::max(0.5, 1.5 * length / speed_mps);
   const int n = std::max(6, int(std::ceil(T / 0.05)));
   std::vector<Eigen::Vector3d> points;
   size_t seg = 1;
@@ -730,7 +805,7 @@ std::optional<ExecTrajectory> ReplanFsm::escapeTrajectoryLocked(double t, const 
   escape.escape = true;
   const Eigen::Vector3d zero = Eigen::Vector3d::Zero();
   if (!UniformBspline::fitToPoints(points, T / n, zero, zero, zero, zero, 3, &escape.spline)) {
-    *report = "no escape: the walk could not be fitted";
+    *report = std::string("no ") + what + ": the walk could not be fitted";
     return std::nullopt;
   }
   // Checked along the curve: never closer than it starts (nor than the safety clearance, when it
@@ -751,27 +826,136 @@ std::optional<ExecTrajectory> ReplanFsm::escapeTrajectoryLocked(double t, const 
       look.brake_start_s = t;
       look.has_heading_target = true;
       look.heading_target = walk.back();
-      *report = "escape: the way out crosses unknown space; holding and looking there first";
+      *report = std::string(what) + ": the way crosses unknown space; holding and looking there first";
       return look;
     }
     if (!map.interpolate(p, &d, nullptr) || d < floor_m) {
-      *report = "no escape: the fitted escape comes closer to an obstacle than it starts";
+      *report = std::string("no ") + what + ": the fitted manoeuvre comes closer to an obstacle than it starts";
       return std::nullopt;
     }
     if (tau >= escape.spline.duration()) break;
   }
-  char text[160];
-  std::snprintf(text, sizeof(text), "escape: %.2f m up the distance field from %.2f m to %.2f m clearance in %.1f s",
-                length, d0, d_end, escape.spline.duration());
-  *report = text;
   return escape;
+}
+
+void ReplanFsm::giveUpLocked(double t, const EsdfMap& map, GoalStatus status, ReplanStatus replan_status,
+                             const std::string& why, FsmOutput* out) {
+  const std::string reason = "mission given up: " + why;
+  last_goal_status_ = status;
+  goals_.clear();
+  next_goal_ = 0;
+  goals_pending_ = false;
+  rerouting_ = false;
+  route_.clear();
+  route_goals_.clear();
+  consecutive_failures_ = 0;
+  const bool moving = current_ && !current_->manoeuvre() && t < current_->endTime();
+  if (moving) {
+    // A controlled stop along the current path; with no goals left the stop ends in WAIT_TARGET.
+    emergencyStopLocked(t, map, reason, out, nullptr, replan_status);
+    out->event->fallback = "give_up";
+    return;
+  }
+  FsmEvent event;
+  event.trigger = FsmEvent::Trigger::kRetry;
+  event.state = state_;
+  event.status = replan_status;
+  event.fallback = "give_up";
+  event.message = reason;
+  event.position = takeoverStateLocked(t).position;
+  out->event = event;
+  setState(FsmState::kWaitTarget, out, reason);
+}
+
+void ReplanFsm::routeLocked(double t, const EsdfMap& map, std::unique_lock<std::mutex>* lock, FsmOutput* out) {
+  // Does this tick start (or rebuild) a reference, and through which goals?
+  const bool at_rest = (!current_ || t >= current_->endTime()) && odom_velocity_.norm() < config_.stopped_speed_mps;
+  bool starts = false;
+  switch (state_) {
+    case FsmState::kInit: starts = goals_pending_ && have_odom_; break;
+    case FsmState::kWaitTarget:
+    case FsmState::kExecTraj:
+    case FsmState::kReplanTraj: starts = goals_pending_; break;
+    case FsmState::kGenNewTraj: starts = true; break;
+    case FsmState::kEmergencyStop: starts = at_rest && (goals_pending_ || !goals_.empty()); break;
+  }
+  if (!starts) return;
+  const std::vector<Eigen::Vector3d> goals = goals_pending_ ? pending_goals_ : remainingGoalsLocked();
+  if (goals.empty() || (!route_stale_ && goals == route_goals_)) return;
+  for (const Eigen::Vector3d& g : goals)
+    if (!g.allFinite()) return;  // refused by startGoalsLocked
+  const Eigen::Vector3d start = takeoverStateLocked(t + takeover_delay_s_).position;
+
+  // The search, with the mutex released: the safety thread and the inputs go on meanwhile.
+  lock->unlock();
+  Path route{start};
+  SearchStatus status = SearchStatus::kSuccess;
+  size_t failed_leg = 0;
+  int expansions = 0;
+  bool tight = false;  // some leg has a route only at the end clearance
+  for (size_t i = 0; i < goals.size() && status == SearchStatus::kSuccess; ++i) {
+    GlobalRouter::Result leg = router_->route(map, route.back(), goals[i]);
+    expansions += leg.expansions;
+    if (leg.status == SearchStatus::kNoPath) {
+      // Not yet a proof: the vehicle may hover in a passage narrower than the route's clearance (a
+      // dead-end slot it was braked in) that the relaxed start region does not leave. Only when no
+      // way exists even at the end clearance is the goal unreachable.
+      leg = tight_router_->route(map, route.back(), goals[i]);
+      expansions += leg.expansions;
+      tight = tight || leg.status == SearchStatus::kSuccess;
+    }
+    status = leg.status;
+    failed_leg = i;
+    if (status == SearchStatus::kSuccess) route.insert(route.end(), leg.path.begin() + 1, leg.path.end());
+  }
+  lock->lock();
+
+  route_stale_ = false;
+  route_goals_ = goals;
+  failures_at_reroute_ = consecutive_failures_;
+  char text[200];
+  if (status == SearchStatus::kSuccess) {
+    route_ = std::move(route);
+    out->new_route = true;
+    std::snprintf(text, sizeof(text), "global route: %.1f m through %zu points (%d expansions)%s", pathLength(route_),
+                  route_.size(), expansions, tight ? ", narrower than its clearance in places" : "");
+  } else if (status == SearchStatus::kNoPath) {
+    // Both searches exhausted the map window: with unknown space free, no way to this goal exists.
+    std::snprintf(text, sizeof(text),
+                  "goal %zu (%.2f, %.2f, %.2f) is unreachable in the known map: no route keeps even %.2f m from obstacles "
+                  "within the height band [%.2f, %.2f] m",
+                  failed_leg, goals[failed_leg].x(), goals[failed_leg].y(), goals[failed_leg].z(), config_.route.end_clearance_m,
+                  std::max(config_.route.min_z_m, map.geometry().windowMin().z()),
+                  std::min(config_.route.max_z_m, map.geometry().windowMax().z()));
+    if (!out->message.empty()) out->message += "; ";
+    if (goals_pending_ && !rerouting_) {
+      // New goals: refused like a goal in an obstacle (a mission in progress goes on).
+      goals_pending_ = false;
+      new_mission_ = false;
+      last_goal_status_ = GoalStatus::kUnreachable;
+      out->message += std::string("goal refused: ") + toString(GoalStatus::kUnreachable) + ": " + text;
+      return;
+    }
+    giveUpLocked(t, map, GoalStatus::kUnreachable, ReplanStatus::kNoPath, text, out);
+    return;
+  } else {
+    // No proof either way (budget, start or goal inside the route's end clearance): straight references.
+    route_.clear();
+    out->new_route = true;
+    std::snprintf(text, sizeof(text), "no global route (%s at goal %zu): references go straight through the goals",
+                  toString(status), failed_leg);
+  }
+  if (!out->message.empty()) out->message += "; ";
+  out->message += text;
 }
 
 bool ReplanFsm::startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out) {
   goals_pending_ = false;
   const std::vector<Eigen::Vector3d> goals = pending_goals_;
+  rerouting_ = false;
   auto refuse = [&](GoalStatus status, const std::string& why) {
     last_goal_status_ = status;
+    new_mission_ = false;
     if (!out->message.empty()) out->message += "; ";
     out->message += std::string("goal refused: ") + toString(status) + ": " + why;
     return false;
@@ -789,8 +973,16 @@ bool ReplanFsm::startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out) {
   FlatState start = takeoverStateLocked(t + takeover_delay_s_);
   start.jerk.setZero();  // the reference's jerk at the start is free of the spline's knots
   std::vector<Eigen::Vector3d> waypoints{start.position};
-  for (const Eigen::Vector3d& g : goals)
-    if ((g - waypoints.back()).norm() > 1e-3) waypoints.push_back(g);
+  // Through the global route when there is one for these goals (its first point is where the
+  // vehicle was when it was searched; the reference starts from where it takes over).
+  const bool routed = config_.global_route && route_.size() >= 2 && route_goals_ == goals;
+  if (routed) {
+    for (size_t i = 1; i < route_.size(); ++i)
+      if ((route_[i] - waypoints.back()).norm() > 1e-3) waypoints.push_back(route_[i]);
+  } else {
+    for (const Eigen::Vector3d& g : goals)
+      if ((g - waypoints.back()).norm() > 1e-3) waypoints.push_back(g);
+  }
   if (waypoints.size() < 2) waypoints.push_back(goals.back() + Eigen::Vector3d(1e-3, 0, 0));
   PolynomialTrajectory ref;
   const TrajectoryStatus status =
@@ -799,10 +991,18 @@ bool ReplanFsm::startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out) {
     return refuse(GoalStatus::kReferenceFailed, std::string("minimum-snap reference: ") + toString(status));
   goals_ = goals;
   next_goal_ = 0;
+  if (new_mission_) {
+    new_mission_ = false;
+    mission_start_s_ = t;
+    mission_limit_s_ = config_.mission_timeout_s > 0.0 ? config_.mission_timeout_s : std::max(60.0, 4.0 * ref.duration());
+    backoffs_ = 0;
+  }
   reference_ = std::move(ref);
   last_goal_status_ = GoalStatus::kAccepted;
   out->new_reference = true;
-  setState(FsmState::kGenNewTraj, out, "new reference, " + std::to_string(goals.size()) + " goal(s)");
+  setState(FsmState::kGenNewTraj, out,
+           std::string(rerouting_ ? "re-routed" : "new") + " reference, " + std::to_string(goals.size()) + " goal(s)" +
+               (routed ? ", along the global route" : ""));
   return true;
 }
 
@@ -869,11 +1069,13 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
     replaceCurrentLocked(traj);
     collision_ahead_ = false;
     consecutive_failures_ = 0;
+    rerouted_since_success_ = false;
     event.published = true;
     out->trajectory = traj;
     setState(FsmState::kExecTraj, out, "");
   } else {
     ++consecutive_failures_;
+    std::string give_up_why;
     // What the vehicle does now; a discarded plan keeps its label unless it ends the mission.
     const bool late = result.status == ReplanStatus::kSuccess;
     if (late) event.fallback = superseded ? "discarded_superseded" : "discarded_late";
@@ -881,34 +1083,72 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
       // A braking trajectory took over while planning: the emergency stop owns the state now.
     } else if (generating) {
       const bool moving = current_ && !current_->manoeuvre() && t < current_->endTime();
-      if (consecutive_failures_ >= config_.max_plan_failures)
+      char text[160];
+      if (!config_.global_route && consecutive_failures_ >= config_.max_plan_failures) {
         event.fallback = "give_up";
-      else if (!late)
+        give_up_why = "no trajectory after " + std::to_string(consecutive_failures_) + " tries";
+      } else if (config_.global_route && t - mission_start_s_ > mission_limit_s_) {
+        event.fallback = "give_up";
+        std::snprintf(text, sizeof(text), "no trajectory, and the mission's time limit of %.0f s has passed (%d tries in a row failed)",
+                      mission_limit_s_, consecutive_failures_);
+        give_up_why = text;
+      } else if (!late) {
         event.fallback = moving ? "keep_current" : "hover_retry";
+      }
     } else if (!late) {
       event.fallback = "keep_current";
     }
     // At rest too close to an obstacle for the replanner to start: a slow escape first, then (as
     // after braking) a new reference from where it ends.
     const bool at_rest = !current_ || t >= current_->endTime();
+    const bool giving_up = event.fallback == "give_up";
     std::string escape_report;
     std::optional<ExecTrajectory> escape;
-    if (!superseded && result.status == ReplanStatus::kStartInCollision && at_rest && event.fallback != "give_up")
+    if (!superseded && result.status == ReplanStatus::kStartInCollision && at_rest && !giving_up)
       escape = escapeTrajectoryLocked(t, map, &escape_report);
+    // Plans keep failing from rest (or it cannot start and has no way up the distance field): back
+    // off along the flown path, and re-route from there.
+    bool backoff = false;
+    if (!escape && config_.global_route && !superseded && generating && at_rest && !giving_up &&
+        backoffs_ < config_.max_backoffs &&
+        (result.status == ReplanStatus::kStartInCollision || consecutive_failures_ >= config_.max_plan_failures)) {
+      std::string report;
+      escape = backoffTrajectoryLocked(t, map, &report);
+      backoff = escape.has_value();
+      escape_report += (escape_report.empty() ? "" : "; ") + report;
+      if (backoff) ++backoffs_;
+    }
     if (!escape && !escape_report.empty()) event.message += "; " + escape_report;
+    // The way looks blocked (no guide path, no free local goal) or plans keep failing: re-route.
+    const bool blocked = result.status == ReplanStatus::kNoPath || result.status == ReplanStatus::kGoalInCollision;
+    if (config_.global_route && !superseded && !giving_up && !escape &&
+        ((blocked && !rerouted_since_success_) ||
+         consecutive_failures_ - failures_at_reroute_ >= config_.reroute_after_failures)) {
+      route_stale_ = true;
+      rerouted_since_success_ = true;
+      failures_at_reroute_ = consecutive_failures_;
+      if (!generating) {  // a moving vehicle: a new reference from the takeover state, next tick
+        pending_goals_ = remainingGoalsLocked();
+        goals_pending_ = !pending_goals_.empty();
+        rerouting_ = goals_pending_;
+      }
+    }
     if (escape) {
       escape->id = next_id_++;
       replaceCurrentLocked(*escape);
       consecutive_failures_ = 0;  // the escape is a new start: the tries after it are counted anew
+      failures_at_reroute_ = 0;
+      route_stale_ = true;
       collision_ahead_ = false;
       event.published = true;
-      event.fallback = "escape";
+      event.fallback = backoff ? "back_off" : "escape";
       event.message += "; " + escape_report;
       out->trajectory = *escape;
       setState(FsmState::kEmergencyStop, out, escape_report);
-    } else if (event.fallback == "give_up") {
-      setState(FsmState::kWaitTarget, out, "no trajectory after " + std::to_string(consecutive_failures_) + " tries");
-      consecutive_failures_ = 0;
+    } else if (giving_up) {
+      giveUpLocked(t, map, GoalStatus::kGivenUp, result.status, give_up_why, out);
+      event.published = out->trajectory.has_value();  // the stop of a moving vehicle
+      event.message += "; " + out->event->message;
     } else if (!superseded && !generating) {
       setState(FsmState::kExecTraj, out, "");
       collision_ahead_ = collision_ahead_ || trigger == FsmEvent::Trigger::kCollisionAhead;
@@ -950,6 +1190,17 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
     if (!out.message.empty()) out.message += "; ";
     out.message += "inputs fresh again";
   }
+  // The flown path, for back-offs: commanded positions (checked trajectories) 0.25 m apart.
+  if (current_) {
+    const Eigen::Vector3d p = takeoverStateLocked(t).position;
+    if (flown_.empty() || (p - flown_.back()).norm() >= 0.25) flown_.push_back(p);
+    if (flown_.size() > 200) flown_.erase(flown_.begin(), flown_.begin() + 100);
+  }
+  if (config_.global_route) {
+    const FsmState before = state_;
+    routeLocked(t, map, &lock, &out);
+    if (out.event || state_ != before) return out;  // given up, or a braking took over meanwhile
+  }
   switch (state_) {
     case FsmState::kInit:
       if (have_odom_) setState(FsmState::kWaitTarget, &out, "odometry received");
@@ -972,7 +1223,8 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
     case FsmState::kExecTraj:
     case FsmState::kReplanTraj: {
       if (goals_pending_) {
-        if (startGoalsLocked(t, map, &out)) plan(t, map, FsmEvent::Trigger::kNewGoal, &lock, &out, now);
+        const FsmEvent::Trigger trigger = rerouting_ ? FsmEvent::Trigger::kReroute : FsmEvent::Trigger::kNewGoal;
+        if (startGoalsLocked(t, map, &out)) plan(t, map, trigger, &lock, &out, now);
         break;
       }
       if (!current_) {
@@ -1047,6 +1299,7 @@ void ReplanFsm::emergencyStopLocked(double t, const EsdfMap& map, const std::str
   event.published = true;
   replaceCurrentLocked(brake);
   collision_ahead_ = false;
+  route_stale_ = true;  // once stopped, the reference is rebuilt along a new route
   setState(FsmState::kEmergencyStop, out, event.message);
   out->trajectory = brake;
   out->event = event;
@@ -1082,6 +1335,8 @@ FsmOutput ReplanFsm::checkSafety(double t, const EsdfMap& map) {
     emergencyStopLocked(t, map, text, &out, &from, ReplanStatus::kInvalidInput);
     current_->reanchor = out.trajectory->reanchor = true;  // the step to the measured position is deliberate
     out.odometry_jumped = true;
+    flown_.clear();  // in the old frame
+    route_stale_ = true;
     return out;
   }
   // Braking and escapes were checked when made and are not replanned (they end at rest).

@@ -248,41 +248,153 @@ TEST(ReplanFsm, ReplansWhenAnObstacleIsRevealedAhead) {
   EXPECT_GT(log.min_clearance, 0.2);
 }
 
+// A wall closes the whole corridor. With the global route (the default), the route search proves
+// the goal unreachable as soon as the wall is seen: the FSM brakes and gives the mission up at
+// once, saying why. Without it, it tries max_plan_failures times from rest first.
 TEST(ReplanFsm, StopsBeforeAWallWithNoWayAround) {
   Corridor before, after;
   after.scene.box({11.0, -1.0, -1.0}, {11.4, 9.0, 4.0});  // closes the whole corridor
   const EsdfMap& unknown = before.scene.finish();
   const EsdfMap& revealed = after.scene.finish();
-  ReplanFsm::Config config = testConfig();
-  config.max_plan_failures = 5;
-  auto fsm = makeFsm(config);
-  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}},
-                            [&](double, const Eigen::Vector3d& p) -> const EsdfMap& { return p.x() < 5.0 ? unknown : revealed; },
-                            600, revealed);
-  EXPECT_FALSE(log.goal_reached);
-  EXPECT_TRUE(log.braked);
-  // It kept the current trajectory while that was safe (failed replans), then braked.
-  bool kept = false;
-  for (const FsmEvent& e : log.events) kept = kept || e.fallback == "keep_current";
-  EXPECT_TRUE(kept);
-  // It stopped before the wall, never came closer than the safety clearance, and gave up the mission.
-  EXPECT_GT(log.min_clearance, config.safety_clearance_m);
-  EXPECT_LT(log.flown.back().x(), 11.0 - config.safety_clearance_m);
-  EXPECT_EQ(fsm->state(), FsmState::kWaitTarget);
-  expectContinuous(log.trajectories);
-  // Stopped, it tried a new reference from rest max_plan_failures times before giving up: the
-  // failed replans before the stop do not count against it (they used to, and a flight of
-  // make bench-flight gave its mission up after a single try from rest).
-  size_t last_brake = 0;
-  for (size_t i = 0; i < log.events.size(); ++i)
-    if (log.events[i].trigger == FsmEvent::Trigger::kEmergency) last_brake = i;
-  int tries = 0, give_ups = 0;
-  for (size_t i = last_brake + 1; i < log.events.size(); ++i) {
-    tries += log.events[i].fallback == "hover_retry" || log.events[i].fallback == "give_up";
-    give_ups += log.events[i].fallback == "give_up";
+  for (const bool global_route : {true, false}) {
+    SCOPED_TRACE(global_route ? "global route" : "no global route");
+    ReplanFsm::Config config = testConfig();
+    config.max_plan_failures = 5;
+    config.global_route = global_route;
+    auto fsm = makeFsm(config);
+    const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}},
+                              [&](double, const Eigen::Vector3d& p) -> const EsdfMap& { return p.x() < 5.0 ? unknown : revealed; },
+                              600, revealed);
+    EXPECT_FALSE(log.goal_reached);
+    EXPECT_TRUE(log.braked);
+    // It stopped before the wall, never came closer than the safety clearance, and gave up the mission.
+    EXPECT_GT(log.min_clearance, config.safety_clearance_m);
+    EXPECT_LT(log.flown.back().x(), 11.0 - config.safety_clearance_m);
+    EXPECT_EQ(fsm->state(), FsmState::kWaitTarget);
+    expectContinuous(log.trajectories);
+    int give_ups = 0;
+    std::string why;
+    for (const FsmEvent& e : log.events)
+      if (e.fallback == "give_up") ++give_ups, why = e.message;
+    EXPECT_EQ(give_ups, 1);
+    if (global_route) {
+      EXPECT_EQ(fsm->lastGoalStatus(), GoalStatus::kUnreachable);
+      EXPECT_NE(why.find("unreachable in the known map"), std::string::npos) << why;
+      EXPECT_TRUE(fsm->route().empty());
+      continue;
+    }
+    // It kept the current trajectory while that was safe (failed replans), then braked.
+    bool kept = false;
+    for (const FsmEvent& e : log.events) kept = kept || e.fallback == "keep_current";
+    EXPECT_TRUE(kept);
+    EXPECT_EQ(fsm->lastGoalStatus(), GoalStatus::kGivenUp);
+    // Stopped, it tried a new reference from rest max_plan_failures times before giving up: the
+    // failed replans before the stop do not count against it (they used to, and a flight of
+    // make bench-flight gave its mission up after a single try from rest).
+    size_t last_brake = 0;
+    for (size_t i = 0; i < log.events.size(); ++i)
+      if (log.events[i].trigger == FsmEvent::Trigger::kEmergency) last_brake = i;
+    int tries = 0;
+    for (size_t i = last_brake + 1; i < log.events.size(); ++i)
+      tries += log.events[i].fallback == "hover_retry" || log.events[i].fallback == "give_up";
+    EXPECT_EQ(tries, config.max_plan_failures);
   }
-  EXPECT_EQ(tries, config.max_plan_failures);
-  EXPECT_EQ(give_ups, 1);
+}
+
+// A wall across the corridor whose only window lies 9 m aside of the straight line, outside the
+// local search's sampling box (3.5 m) and the A* fallback's (3 m). Seen from 7 m, the replans find
+// no way; the FSM re-routes over the whole map, and the new reference leads through the window.
+// Without the global route the same flight never reaches the goal.
+TEST(ReplanFsm, ReroutesThroughAWindowFarAside) {
+  auto hall = [](bool with_wall) {
+    SyntheticScene scene(Eigen::Vector3d(24.0, 16.0, 3.0));
+    if (with_wall)
+      scene.fill([](const Eigen::Vector3d& p) {
+        return p.x() >= 11.9 && p.x() <= 12.1 && !(std::abs(p.y() - 13.0) <= 0.6 && std::abs(p.z() - 1.5) <= 0.6);
+      });
+    return scene;
+  };
+  SyntheticScene before_scene = hall(false), after_scene = hall(true);
+  const EsdfMap& before = before_scene.finish();
+  const EsdfMap& after = after_scene.finish();
+  auto mapAt = [&](double, const Eigen::Vector3d& p) -> const EsdfMap& { return p.x() < 5.0 ? before : after; };
+  for (const bool global_route : {true, false}) {
+    SCOPED_TRACE(global_route ? "global route" : "no global route");
+    ReplanFsm::Config config = testConfig();
+    config.global_route = global_route;
+    config.max_plan_failures = 10;
+    auto fsm = makeFsm(config);
+    const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, mapAt, 1200, after);
+    EXPECT_EQ(log.goal_reached, global_route);
+    EXPECT_GT(log.min_clearance, config.safety_clearance_m);
+    expectContinuous(log.trajectories, config.max_start_velocity_step_mps + 1e-6);
+    if (!global_route) continue;
+    int reroutes = 0;
+    for (const FsmEvent& e : log.events) reroutes += e.trigger == FsmEvent::Trigger::kReroute;
+    EXPECT_GE(reroutes, 1);
+    // Through the window.
+    bool through = false;
+    for (size_t i = 1; i < log.flown.size(); ++i)
+      if ((log.flown[i - 1].x() - 12.0) * (log.flown[i].x() - 12.0) <= 0.0) through = std::abs(log.flown[i].y() - 13.0) < 0.6;
+    EXPECT_TRUE(through);
+    std::printf("window far aside: goal reached in %.1f s, %zu planning calls, %d re-routes\n", log.duration_s,
+                log.events.size(), reroutes);
+  }
+}
+
+// The vehicle flies into a slot 0.4 m wide that is revealed only once it is inside: a dead end,
+// and the wall across the hall has its only door 9 m aside. It brakes in the slot, where it cannot
+// start a plan (0.2 m from both walls, below the optimiser's clearance) and no way up the distance
+// field exists (a ridge); it backs off along the flown path, re-routes from there and flies through
+// the door. With back-offs switched off it stays in the slot until the mission's time limit.
+TEST(ReplanFsm, BacksOffOutOfADeadEndAndReroutes) {
+  auto hall = [](bool revealed) {
+    SyntheticScene scene(Eigen::Vector3d(24.0, 16.0, 3.0));
+    if (revealed)
+      scene.fill([](const Eigen::Vector3d& p) {
+        const bool slot_walls = p.x() >= 6.5 && p.x() <= 10.0 && std::abs(p.y() - 4.0) >= 0.2 && std::abs(p.y() - 4.0) <= 0.8;
+        const bool wall = p.x() >= 10.0 && p.x() <= 10.4 && std::abs(p.y() - 13.0) > 1.0;
+        return slot_walls || wall;
+      });
+    return scene;
+  };
+  SyntheticScene before_scene = hall(false), after_scene = hall(true);
+  const EsdfMap& before = before_scene.finish();
+  const EsdfMap& after = after_scene.finish();
+  bool revealed = false;  // once seen, the slot stays in the map
+  auto mapAt = [&](double, const Eigen::Vector3d& p) -> const EsdfMap& {
+    revealed = revealed || p.x() >= 7.5;
+    return revealed ? after : before;
+  };
+  for (const int max_backoffs : {3, 0}) {
+    SCOPED_TRACE("max_backoffs " + std::to_string(max_backoffs));
+    revealed = false;
+    ReplanFsm::Config config = testConfig();
+    config.max_backoffs = max_backoffs;
+    config.max_plan_failures = 10;
+    config.mission_timeout_s = max_backoffs > 0 ? 60.0 : 12.0;
+    auto fsm = makeFsm(config);
+    const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{20, 4, 1.5}}, mapAt, 1200, after);
+    int backoffs = 0, give_ups = 0;
+    for (const FsmEvent& e : log.events) {
+      backoffs += e.fallback == "back_off";
+      give_ups += e.fallback == "give_up";
+    }
+    EXPECT_GT(log.min_clearance, 0.2);
+    expectContinuous(log.trajectories, config.max_start_velocity_step_mps + 1e-6);
+    if (max_backoffs == 0) {
+      EXPECT_FALSE(log.goal_reached);
+      EXPECT_EQ(backoffs, 0);
+      EXPECT_EQ(give_ups, 1);
+      EXPECT_EQ(fsm->lastGoalStatus(), GoalStatus::kGivenUp);
+      continue;
+    }
+    EXPECT_TRUE(log.goal_reached);
+    EXPECT_GE(backoffs, 1);
+    EXPECT_EQ(give_ups, 0);
+    std::printf("dead end: goal reached in %.1f s after %d back-off(s), %zu planning calls\n", log.duration_s, backoffs,
+                log.events.size());
+  }
 }
 
 // An obstacle revealed so late that braking at the planner's limit cannot stop before it: the
@@ -350,16 +462,25 @@ TEST(ReplanFsm, EscapesFromInsideTheClearanceThenFliesTheMission) {
   EXPECT_TRUE(log.goal_reached);
   EXPECT_LT((log.flown.back() - Eigen::Vector3d(20, 4.5, 1.5)).norm(), 0.3);
 
-  // With the escape switched off it stays where it is and gives the mission up.
+  // With the escape switched off (and no flown path to back off along) it stays where it is, and
+  // gives the mission up when its time limit has passed, saying so.
   ReplanFsm::Config config = testConfig();
   config.max_escape_length_m = 0.0;
-  config.max_plan_failures = 5;
+  config.mission_timeout_s = 3.0;
   auto stuck = makeFsm(config);
   const FlightLog stuck_log = fly(stuck.get(), start, {{20, 4.5, 1.5}}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
                                   100, map);
   EXPECT_FALSE(stuck_log.goal_reached);
   EXPECT_TRUE(stuck_log.trajectories.empty());
   EXPECT_EQ(stuck->state(), FsmState::kWaitTarget);
+  EXPECT_EQ(stuck->lastGoalStatus(), GoalStatus::kGivenUp);
+  ASSERT_FALSE(stuck_log.events.empty());
+  const FsmEvent& last = stuck_log.events.back();
+  EXPECT_EQ(last.fallback, "give_up");
+  EXPECT_NE(last.message.find("time limit of 3 s"), std::string::npos) << last.message;
+  int tries = 0;
+  for (const FsmEvent& e : stuck_log.events) tries += e.fallback == "hover_retry";
+  EXPECT_GE(tries, int(2.9 / 0.05));  // it kept trying until then (every tick)
 }
 
 // The way out of an obstacle's clearance crosses unknown space: the FSM holds and looks there

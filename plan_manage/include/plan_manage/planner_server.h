@@ -32,6 +32,7 @@
 //                                input freshness (the trajectory server stops the vehicle without it)
 //               ~replan_event    topo_planner/ReplanEvent, every planning call
 //               ~reference_path  nav_msgs/Path (latched), the global reference
+//               ~global_route    nav_msgs/Path (latched), the mission's global route (empty: none)
 //               ~vis/trajectory, ~vis/candidates, ~vis/guide_paths   visualization_msgs/MarkerArray
 //               ~vis/roadmap (guards, connectors, edges of the last search)  visualization_msgs/MarkerArray
 //
@@ -85,6 +86,7 @@ class PlannerServer {
   /// Publishes what a tick or a safety check returned.
   void handle(const FsmOutput& out);
   void publishReference();
+  void publishRoute();
   void publishPlanMarkers(const ReplanResult& plan, const ExecTrajectory* chosen);
   /// Passes the mapping's last fused depth frame to the FSM.
   void feedDepth();
@@ -101,6 +103,7 @@ class PlannerServer {
   uint64_t session_ = 0;  // random per process: trajectory ordering survives a restart
   ros::Publisher heartbeat_pub_;
   int time_jumps_logged_ = 0;  // safety thread only
+  ros::Publisher route_pub_;
   ros::Publisher bspline_pub_, event_pub_, reference_pub_, traj_vis_pub_, candidates_vis_pub_, guides_vis_pub_,
       roadmap_vis_pub_;
   ros::Timer plan_timer_, safety_timer_;

@@ -29,6 +29,25 @@
 // planned on (the replanner's final check; the braking trajectory is checked too, and its result
 // reported, since braking is the last safe action left).
 //
+// Global guidance (global_route). Every reference (a new mission, a rebuild after a stop, a retry)
+// goes through the mission's global route (path_searching GlobalRouter: A* over the whole map
+// window at the guide search's clearance, unknown space free, shortened), so the local search,
+// which samples around the reference segment, looks along it. The route is recomputed when the
+// goals change, after a stop, and when plans keep failing: at once on kNoPath or kGoalInCollision
+// (the map shows the way blocked), and every reroute_after_failures failed plans; on a moving
+// vehicle the rebuilt reference starts from the state the next trajectory takes over at. The
+// search runs in tick() with the mutex released (it may take tens of milliseconds).
+//
+// No silent give-up (with global_route). A mission is given up only when the route search proves
+// a goal unreachable (no route through known and unknown space in its height band, neither at its
+// clearance nor at its end clearance: the FSM brakes if moving; a route found only at the end
+// clearance, e.g. out of a narrow slot the vehicle stopped in, is used as the route) or when the mission time limit has passed while plans fail; the
+// reason is in the event (fallback "give_up") and in GoalStatus. Before that, at rest, it changes
+// strategy: re-route (above), and after max_plan_failures failed plans, or when it cannot start
+// and no escape up the distance field exists, back off along the flown path (at most max_backoffs
+// times per mission) and re-route from there. Without global_route, the mission is given up after
+// max_plan_failures failed first plans.
+//
 // Known-space commitment (commit_to_known_space, FASTER's safe/committed split done along the
 // path). The replanner plans optimistically: unknown space counts as free, so it explores. What the
 // FSM publishes is cut to what is known: the plan is flown as planned while, at every instant, a
@@ -72,6 +91,7 @@
 // one) took over in the meantime. The map passed in must not change during the call (the caller
 // holds its read lock).
 
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -80,6 +100,7 @@
 #include <string>
 #include <vector>
 
+#include "path_searching/global_router.h"
 #include "topo_replan/topo_replanner.h"
 
 namespace topo_planner {
@@ -95,6 +116,8 @@ enum class GoalStatus {
   kGoalOutOfMap,    ///< a goal lies outside the map window
   kReferenceFailed, ///< no minimum-snap reference through the goals
   kInputsStale,     ///< depth or odometry is stale or has never arrived (see InputHealth)
+  kUnreachable,     ///< the global route search proves a goal unreachable in the known map
+  kGivenUp,         ///< the mission was given up: no trajectory within its time limit (or tries)
 };
 const char* toString(GoalStatus status);
 
@@ -127,12 +150,13 @@ struct ExecTrajectory {
 
 /// What one call did, for logging and the ReplanEvent message.
 struct FsmEvent {
-  enum class Trigger { kNewGoal, kCollisionAhead, kPeriodic, kRetry, kEmergency, kTimeJump };
+  enum class Trigger { kNewGoal, kCollisionAhead, kPeriodic, kRetry, kEmergency, kTimeJump, kReroute };
   Trigger trigger = Trigger::kNewGoal;
   FsmState state = FsmState::kInit;     ///< state when it started
   bool published = false;               ///< a new trajectory was returned
   ReplanStatus status = ReplanStatus::kSuccess;
-  std::string fallback = "none";        ///< none | keep_current | stop | give_up | discarded_late
+  /// none | keep_current | hover_retry | stop | escape | back_off | give_up | discarded_late | discarded_superseded
+  std::string fallback = "none";
   std::string message;
   Eigen::Vector3d position = Eigen::Vector3d::Zero();  ///< start of the planned trajectory
   ReplanStats stats;
@@ -163,6 +187,7 @@ struct FsmOutput {
   std::optional<FsmEvent> event;                  ///< a planning call happened
   std::optional<ReplanResult> plan;               ///< its full result (candidates etc., for rviz)
   bool new_reference = false;                     ///< reference() changed
+  bool new_route = false;                         ///< route() changed
   bool goal_reached = false;                      ///< the last goal of the mission was reached
   /// Odometry jumped away from the commanded state (a VIO relocalisation): the map built in the old
   /// frame no longer lines up with the new one; the caller may forget it.
@@ -219,6 +244,18 @@ class ReplanFsm {
     /// An intermediate goal counts as reached (and is left out of rebuilt references) once the vehicle
     /// came this close to it [m].
     double waypoint_reached_radius_m = 1.0;
+
+    // Global guidance and strategies (see the class comment).
+    bool global_route = true;           ///< false: straight references through the goals, old give-up rule
+    GlobalRouter::Config route;         ///< the route search (its clearance: keep the guide search's)
+    int reroute_after_failures = 3;     ///< re-route every this many consecutive failed plans
+    double backoff_length_m = 1.5;      ///< a back-off flies at least this far back along the flown path [m] ...
+    double max_backoff_length_m = 3.0;  ///< ... and on until escape_clearance_m from obstacles, up to this [m]
+    double backoff_speed_mps = 1.0;     ///< peak speed of a back-off (the flown path is known free) [m/s]
+    int max_backoffs = 3;               ///< back-offs per mission
+    /// A mission whose plans fail after this long is given up [s]; 0: 60 s or 4 times the duration
+    /// of its first reference, whichever is longer.
+    double mission_timeout_s = 0.0;
     /// A plan whose start velocity differs from the commanded one by more than this (the replanner
     /// could not restore it after time reallocation) is not published: setpoints never step [m/s].
     double max_start_velocity_step_mps = 0.1;
@@ -266,6 +303,8 @@ class ReplanFsm {
   PolynomialTrajectory reference() const;
   /// The goals of the mission not reached yet (what a rebuilt reference goes through).
   std::vector<Eigen::Vector3d> remainingGoals() const;
+  /// The mission's global route (empty when none: no mission, global_route off, or no route found).
+  Path route() const;
   int timeJumps() const;  ///< time jumps seen so far
   int serverResyncs() const;  ///< timing re-synchronisations with the trajectory server so far
 
@@ -315,6 +354,19 @@ class ReplanFsm {
   /// never come closer to an obstacle than it starts (or than the safety clearance); nullopt with
   /// the reason in `report` when there is no such way.
   std::optional<ExecTrajectory> escapeTrajectoryLocked(double t, const EsdfMap& map, std::string* report) const;
+  /// From the commanded position at rest, back along the flown path (see Config); nullopt with the
+  /// reason when there is no flown path or the fitted manoeuvre fails its check.
+  std::optional<ExecTrajectory> backoffTrajectoryLocked(double t, const EsdfMap& map, std::string* report) const;
+  /// A slow rest-to-rest manoeuvre along `walk` (from the commanded position p0, d0 from obstacles),
+  /// peaking at speed_mps, checked like an escape; nullopt with the reason when the check fails.
+  std::optional<ExecTrajectory> restToRestLocked(const std::vector<Eigen::Vector3d>& walk, double t, const EsdfMap& map,
+                                                 double d0, double speed_mps, const char* what, std::string* report) const;
+  /// The global route for the goals the next reference will go through, when it is stale (mutex
+  /// released during the search); gives the mission up when the route proves a goal unreachable.
+  void routeLocked(double t, const EsdfMap& map, std::unique_lock<std::mutex>* lock, FsmOutput* out);
+  /// Ends the mission for `why` (braking first when moving), with a give_up event.
+  void giveUpLocked(double t, const EsdfMap& map, GoalStatus status, ReplanStatus replan_status, const std::string& why,
+                    FsmOutput* out);
   void plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, std::unique_lock<std::mutex>* lock,
             FsmOutput* out, const std::function<double()>& now);
 
@@ -355,6 +407,20 @@ class ReplanFsm {
   int server_resyncs_ = 0;
   bool collision_ahead_ = false;  // set by checkSafety, consumed by tick
   int consecutive_failures_ = 0;
+  // Global guidance and strategies.
+  std::unique_ptr<GlobalRouter> router_;  // used by tick() only, outside the lock
+  std::unique_ptr<GlobalRouter> tight_router_;  // ... at the route's end clearance: the proof of unreachability
+  Path route_;                            // through route_goals_; empty: straight references
+  std::vector<Eigen::Vector3d> route_goals_;
+  bool route_stale_ = true;
+  bool rerouting_ = false;                // the pending goals are a re-route of the mission
+  bool rerouted_since_success_ = false;   // an immediate re-route was done since the last published plan
+  int failures_at_reroute_ = 0;
+  std::vector<Eigen::Vector3d> flown_;    // commanded positions 0.25 m apart, newest last (back-offs)
+  int backoffs_ = 0;                      // in this mission
+  bool new_mission_ = false;              // set by setGoals: the next started reference begins a mission
+  double mission_start_s_ = 0.0;
+  double mission_limit_s_ = INFINITY;
   double takeover_delay_s_;       // the adaptive takeover delay (tick() only writes it, under the mutex)
 };
 

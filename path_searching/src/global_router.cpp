@@ -1,0 +1,200 @@
+#include "path_searching/global_router.h"
+
+#include <algorithm>
+#include <cmath>
+#include <queue>
+
+namespace topo_planner {
+
+bool GlobalRouter::Config::validate(std::string* why) const {
+  auto bad = [&](const char* text) {
+    if (why) *why = text;
+    return false;
+  };
+  if (!(clearance_m >= 0.0) || !std::isfinite(clearance_m)) return bad("route clearance_m must be finite and >= 0");
+  if (cell_voxels < 1 || cell_voxels > 4) return bad("route cell_voxels must be 1 to 4");
+  if (!(preferred_clearance_m > 0.0) || !std::isfinite(preferred_clearance_m))
+    return bad("route preferred_clearance_m must be finite and > 0");
+  if (!(clearance_weight >= 0.0) || !std::isfinite(clearance_weight)) return bad("route clearance_weight must be >= 0");
+  if (!(heuristic_weight >= 1.0) || !std::isfinite(heuristic_weight)) return bad("route heuristic_weight must be >= 1");
+  if (!(min_z_m < max_z_m)) return bad("route min_z_m must be below max_z_m");
+  if (!(end_radius_m >= 0.0) || !std::isfinite(end_radius_m)) return bad("route end_radius_m must be finite and >= 0");
+  if (!(end_clearance_m >= 0.0) || !(end_clearance_m <= clearance_m))
+    return bad("route end_clearance_m must be in [0, clearance_m]");
+  if (max_expansions < 1) return bad("route max_expansions must be >= 1");
+  if (shortcut_lookahead < 1) return bad("route shortcut_lookahead must be >= 1");
+  return true;
+}
+
+GlobalRouter::Result GlobalRouter::route(const EsdfMap& map, const Eigen::Vector3d& start, const Eigen::Vector3d& goal) {
+  Result result;
+  if (!start.allFinite() || !goal.allFinite() || !config_.validate(nullptr)) return result;
+  const GridGeometry& geo = map.geometry();
+  if (!geo.inWindow(start) || !geo.inWindow(goal)) {
+    result.status = SearchStatus::kOutOfMap;
+    return result;
+  }
+  const int k = config_.cell_voxels;
+  const VoxelBox window = geo.windowBox();
+  const Eigen::Vector3i n = (window.size().array() + (k - 1)) / k;
+  const size_t volume = size_t(n.x()) * size_t(n.y()) * size_t(n.z());
+  if (stamp_.size() < volume) {
+    stamp_.assign(volume, 0u);
+    cell_stamp_.assign(volume, 0u);
+    g_.resize(volume);
+    parent_.resize(volume);
+    cell_distance_.resize(volume);
+    cell_best_.resize(volume);
+    generation_ = 0;
+  }
+  if (++generation_ >= 0x7fffffffu) {  // the top bit marks closed cells
+    std::fill(stamp_.begin(), stamp_.end(), 0u);
+    std::fill(cell_stamp_.begin(), cell_stamp_.end(), 0u);
+    generation_ = 1;
+  }
+  const uint32_t closed = generation_ | 0x80000000u;
+
+  auto cellOf = [&](const Eigen::Vector3d& p) -> Eigen::Vector3i { return (geo.indexOf(p) - window.min) / k; };
+  auto address = [&](const Eigen::Vector3i& c) {
+    return size_t(c.x()) + size_t(n.x()) * (size_t(c.y()) + size_t(n.y()) * size_t(c.z()));
+  };
+  auto cellAt = [&](size_t a) {
+    const int x = int(a % size_t(n.x())), y = int((a / size_t(n.x())) % size_t(n.y())), z = int(a / (size_t(n.x()) * n.y()));
+    return Eigen::Vector3i(x, y, z);
+  };
+  auto voxelOf = [&](const Eigen::Vector3i& c, int offset) {
+    return Eigen::Vector3i(window.min + c * k + Eigen::Vector3i(offset % k, (offset / k) % k, offset / (k * k)));
+  };
+  // The best voxel of a cell (see the header), computed once per search.
+  const OccupancyMap& occupancy = map.occupancy();
+  auto bestOf = [&](size_t a, const Eigen::Vector3i& c, bool relaxed) {
+    if (cell_stamp_[a] != generation_) {
+      float best = -1.0f;
+      uint8_t best_offset = 0;
+      for (int o = 0; o < k * k * k; ++o) {
+        const Eigen::Vector3i v = voxelOf(c, o);
+        float d;
+        if (!map.voxelDistance(v, &d) || d <= best) continue;
+        if (!config_.unknown_is_free && occupancy.state(v) == VoxelState::kUnknown) continue;
+        const double z = geo.centerOf(v).z();
+        if (!relaxed && (z < config_.min_z_m || z > config_.max_z_m)) continue;
+        best = d;
+        best_offset = uint8_t(o);
+      }
+      cell_stamp_[a] = generation_;
+      cell_distance_[a] = best;
+      cell_best_[a] = best_offset;
+    }
+    return cell_distance_[a];
+  };
+  const double end_radius2 = config_.end_radius_m * config_.end_radius_m;
+  // Whether a cell may be entered, its best voxel's centre and distance.
+  auto usable = [&](size_t a, const Eigen::Vector3i& c, Eigen::Vector3d* centre, float* distance) {
+    // Relaxed near the ends: the band does not apply and the clearance is end_clearance_m. The
+    // relaxation depends on the cell's centre only, so a cell's best voxel is the same either way
+    // it is reached.
+    const Eigen::Vector3d cell_centre = geo.centerOf(window.min + c * k) + Eigen::Vector3d::Constant(0.5 * (k - 1) * geo.resolution());
+    const bool relaxed = (cell_centre - start).squaredNorm() <= end_radius2 || (cell_centre - goal).squaredNorm() <= end_radius2;
+    const float d = bestOf(a, c, relaxed);
+    if (d < 0.0f) return false;
+    *centre = geo.centerOf(voxelOf(c, cell_best_[a]));
+    *distance = d;
+    return d >= (relaxed ? config_.end_clearance_m : config_.clearance_m);
+  };
+
+  const Eigen::Vector3i cs = cellOf(start), ce = cellOf(goal);
+  const size_t as = address(cs), ae = address(ce);
+  Eigen::Vector3d p;
+  float d;
+  if (!usable(as, cs, &p, &d)) {
+    result.status = SearchStatus::kStartInObstacle;
+    return result;
+  }
+  if (!usable(ae, ce, &p, &d)) {
+    result.status = SearchStatus::kGoalInObstacle;
+    return result;
+  }
+  const double w = config_.clearance_weight, pref = config_.preferred_clearance_m;
+  auto heuristic = [&](const Eigen::Vector3d& q) { return float(config_.heuristic_weight * (q - goal).norm()); };
+
+  struct Item {
+    float f;
+    uint32_t a;
+    bool operator>(const Item& o) const { return f > o.f; }
+  };
+  std::priority_queue<Item, std::vector<Item>, std::greater<Item>> open;
+  stamp_[as] = generation_;
+  g_[as] = 0.0f;
+  parent_[as] = -1;
+  open.push({heuristic(start), uint32_t(as)});
+  bool found = false;
+  while (!open.empty()) {
+    const Item top = open.top();
+    open.pop();
+    if (stamp_[top.a] == closed) continue;
+    stamp_[top.a] = closed;
+    if (top.a == ae) {
+      found = true;
+      break;
+    }
+    if (++result.expansions > config_.max_expansions) {
+      result.status = SearchStatus::kBudgetExhausted;
+      return result;
+    }
+    const Eigen::Vector3i cur = cellAt(top.a);
+    const Eigen::Vector3d pc = top.a == as ? start : geo.centerOf(voxelOf(cur, cell_best_[top.a]));
+    const float gc = g_[top.a];
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          if (dx == 0 && dy == 0 && dz == 0) continue;
+          const Eigen::Vector3i nb = cur + Eigen::Vector3i(dx, dy, dz);
+          if ((nb.array() < 0).any() || (nb.array() >= n.array()).any()) continue;
+          const size_t a = address(nb);
+          if (stamp_[a] == closed) continue;
+          Eigen::Vector3d pn;
+          float dn;
+          if (!usable(a, nb, &pn, &dn)) continue;
+          if (a == ae) pn = goal;
+          const double penalty = 1.0 + w * std::max(0.0, pref - double(dn)) / pref;
+          const float cost = gc + float((pn - pc).norm() * penalty);
+          if (stamp_[a] == generation_ && g_[a] <= cost) continue;
+          stamp_[a] = generation_;
+          g_[a] = cost;
+          parent_[a] = int32_t(top.a);
+          open.push({cost + heuristic(pn), uint32_t(a)});
+        }
+  }
+  if (!found) {
+    result.status = SearchStatus::kNoPath;
+    return result;
+  }
+
+  // The raw route: start, the best voxel of every cell between, goal.
+  std::vector<size_t> cells;
+  for (int64_t a = int64_t(ae); a >= 0; a = parent_[size_t(a)]) cells.push_back(size_t(a));
+  std::reverse(cells.begin(), cells.end());
+  Path& raw = result.raw;
+  raw.push_back(start);
+  for (size_t i = 1; i + 1 < cells.size(); ++i) raw.push_back(geo.centerOf(voxelOf(cellAt(cells[i]), cell_best_[cells[i]])));
+  raw.push_back(goal);
+
+  // Shortening by line of sight at the clearance: from each kept point, the farthest raw point
+  // visible (looking shortcut_lookahead points past the last visible one); a raw step where none is.
+  const VisibilityChecker checker(map, config_.clearance_m, config_.unknown_is_free);
+  Path& path = result.path;
+  path.push_back(raw.front());
+  size_t anchor = 0;
+  while (anchor + 1 < raw.size()) {
+    size_t best = anchor + 1;
+    for (size_t j = anchor + 2; j < raw.size() && j <= best + size_t(config_.shortcut_lookahead); ++j)
+      if (checker.lineVisible(raw[anchor], raw[j])) best = j;
+    path.push_back(raw[best]);
+    anchor = best;
+  }
+  result.length_m = pathLength(path);
+  result.status = SearchStatus::kSuccess;
+  return result;
+}
+
+}  // namespace topo_planner

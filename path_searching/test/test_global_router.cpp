@@ -1,0 +1,172 @@
+// The global route: it finds openings anywhere in a wall, proves closed maps unreachable, keeps its
+// clearance and height band, and starts from a hover closer to an obstacle than its clearance.
+#include <gtest/gtest.h>
+
+#include "path_searching/global_router.h"
+#include "path_searching/topo_path_search.h"
+#include "plan_env/synthetic_scene.h"
+
+namespace topo_planner {
+namespace {
+
+// A 24 x 16 x 3 m hall cut by a 0.2 m wall at x = 12 with one 1.0 x 1.0 m window at (y, z).
+SyntheticScene wallWithWindow(double window_y, double window_z) {
+  SyntheticScene scene(Eigen::Vector3d(24.0, 16.0, 3.0));
+  scene.fill([=](const Eigen::Vector3d& p) {
+    const bool in_wall = p.x() >= 11.9 && p.x() <= 12.1;
+    const bool in_window = std::abs(p.y() - window_y) <= 0.5 && std::abs(p.z() - window_z) <= 0.5;
+    return in_wall && !in_window;
+  });
+  return scene;
+}
+
+// Every segment keeps `clearance` (interpolated ESDF sampled every 2 cm), except within `skip` of the ends.
+double minClearance(const EsdfMap& map, const Path& path, double skip) {
+  double worst = INFINITY;
+  const Path fine = resamplePath(path, 0.02);
+  for (const Eigen::Vector3d& p : fine) {
+    if ((p - path.front()).norm() < skip || (p - path.back()).norm() < skip) continue;
+    worst = std::min(worst, map.query(p).distance);
+  }
+  return worst;
+}
+
+TEST(GlobalRouter, FindsAWindowFarAsideInAWall) {
+  SyntheticScene scene = wallWithWindow(14.5, 1.5);  // 6.5 m aside of the start-goal line
+  const EsdfMap& map = scene.finish();
+  GlobalRouter router{GlobalRouter::Config()};
+  const Eigen::Vector3d start(2, 8, 1.5), goal(22, 8, 1.5);
+  const GlobalRouter::Result r = router.route(map, start, goal);
+  ASSERT_EQ(r.status, SearchStatus::kSuccess);
+  EXPECT_EQ(r.path.front(), start);
+  EXPECT_EQ(r.path.back(), goal);
+  // Through the window: the route crosses x = 12 inside it.
+  bool through = false;
+  const Path fine = resamplePath(r.path, 0.05);
+  for (size_t i = 1; i < fine.size(); ++i)
+    if ((fine[i - 1].x() - 12.0) * (fine[i].x() - 12.0) <= 0.0)
+      through = std::abs(fine[i].y() - 14.5) < 0.5 && std::abs(fine[i].z() - 1.5) < 0.5;
+  EXPECT_TRUE(through);
+  // It keeps the clearance (a 1 m window leaves 0.2 m of play at 0.3 m) and is short: the detour
+  // around the wall's window is at most 25% longer than the straight ways to and from the window.
+  EXPECT_GE(minClearance(map, r.path, 0.0), 0.3 - 1e-6);
+  const Eigen::Vector3d window(12, 14.5, 1.5);
+  EXPECT_LT(r.length_m, 1.25 * ((window - start).norm() + (goal - window).norm()));
+  EXPECT_LE(r.path.size(), 8u);  // shortened to a few corners
+
+  // The local search alone, from the same start, samples around the line and finds no way.
+  TopoPathSearch::Config sc;
+  sc.roadmap.max_time_s = 0.0;
+  TopoPathSearch search(sc);
+  const TopoSearchResult local = search.search(map, start, goal);
+  EXPECT_NE(local.status, SearchStatus::kSuccess);
+}
+
+TEST(GlobalRouter, AClosedWallProvesTheGoalUnreachable) {
+  SyntheticScene scene(Eigen::Vector3d(24.0, 8.0, 3.0));
+  scene.box({11.8, -1, -1}, {12.2, 9, 4});
+  const EsdfMap& map = scene.finish();
+  GlobalRouter router{GlobalRouter::Config()};
+  const GlobalRouter::Result r = router.route(map, {2, 4, 1.5}, {22, 4, 1.5});
+  EXPECT_EQ(r.status, SearchStatus::kNoPath);
+  EXPECT_TRUE(r.path.empty());
+}
+
+TEST(GlobalRouter, KeepsToTheHeightBand) {
+  // The wall stops 0.6 m below the ceiling: over it is the only way.
+  SyntheticScene scene(Eigen::Vector3d(24.0, 8.0, 3.0));
+  scene.box({11.8, -1, -1}, {12.2, 9, 2.4});
+  const EsdfMap& map = scene.finish();
+  GlobalRouter::Config c;
+  GlobalRouter open_band(c);
+  const GlobalRouter::Result over = open_band.route(map, {2, 4, 1.0}, {22, 4, 1.0});
+  ASSERT_EQ(over.status, SearchStatus::kSuccess);
+  double top = 0.0;
+  for (const Eigen::Vector3d& p : over.path) top = std::max(top, p.z());
+  EXPECT_GT(top, 2.4);
+  c.max_z_m = 2.2;  // a geofence below the gap
+  GlobalRouter fenced(c);
+  EXPECT_EQ(fenced.route(map, {2, 4, 1.0}, {22, 4, 1.0}).status, SearchStatus::kNoPath);
+}
+
+TEST(GlobalRouter, RoutesThroughUnknownSpaceOnlyWhenAllowed) {
+  // The only way past the wall is a gap of unknown space.
+  SyntheticScene scene(Eigen::Vector3d(24.0, 8.0, 3.0));
+  scene.box({11.8, -1, -1}, {12.2, 9, 4});
+  scene.box({11.8, 3.0, 0.5}, {12.2, 5.0, 2.5});
+  scene.fill([](const Eigen::Vector3d& p) { return p.x() >= 11.8 && p.x() <= 12.2 && p.y() >= 3.0 && p.y() <= 5.0 &&
+                                                  p.z() >= 0.5 && p.z() <= 2.5; },
+             VoxelState::kUnknown);
+  const EsdfMap& map = scene.finish();
+  GlobalRouter::Config c;
+  EXPECT_EQ(GlobalRouter(c).route(map, {2, 4, 1.5}, {22, 4, 1.5}).status, SearchStatus::kSuccess);
+  c.unknown_is_free = false;
+  EXPECT_EQ(GlobalRouter(c).route(map, {2, 4, 1.5}, {22, 4, 1.5}).status, SearchStatus::kNoPath);
+}
+
+TEST(GlobalRouter, StartsFromAHoverInsideItsClearance) {
+  SyntheticScene scene(Eigen::Vector3d(24.0, 8.0, 3.0));
+  scene.pillar(5.0, 4.0, 0.4);
+  const EsdfMap& map = scene.finish();
+  GlobalRouter router{GlobalRouter::Config()};
+  const Eigen::Vector3d start(5.0, 4.0 - 0.4 - 0.18, 1.5);  // 0.18 m from the pillar
+  ASSERT_LT(map.query(start).distance, 0.3);
+  const GlobalRouter::Result r = router.route(map, start, {20, 4, 1.5});
+  ASSERT_EQ(r.status, SearchStatus::kSuccess);
+  EXPECT_GE(minClearance(map, r.path, 0.6), 0.3 - 1e-6);
+  // ... but not from inside an obstacle.
+  EXPECT_EQ(router.route(map, {5.0, 4.0, 1.5}, {20, 4, 1.5}).status, SearchStatus::kStartInObstacle);
+  EXPECT_EQ(router.route(map, {20, 4, 1.5}, {5.0, 4.0, 1.5}).status, SearchStatus::kGoalInObstacle);
+}
+
+TEST(GlobalRouter, ForestRoutesAreNearlyStraightAndCheap) {
+  for (uint32_t seed = 1; seed <= 4; ++seed) {
+    const Eigen::Vector3d start(-15, 0, 1), goal(15, -4, 1.3);
+    SyntheticScene scene = SyntheticScene::simulationForest(ObstacleDensity::kHigh, seed, {start, goal});
+    const EsdfMap& map = scene.finish();
+    GlobalRouter router{GlobalRouter::Config()};
+    const GlobalRouter::Result r = router.route(map, start, goal);
+    ASSERT_EQ(r.status, SearchStatus::kSuccess) << "seed " << seed;
+    EXPECT_LT(r.length_m, 1.2 * (goal - start).norm()) << "seed " << seed;
+    // The shortcuts keep 0.3 m at the voxel centres they cross; between centres the interpolated
+    // field may dip up to about half a voxel below.
+    EXPECT_GE(minClearance(map, r.path, 0.0), 0.25) << "seed " << seed;
+    // Weighted A* on 0.2 m cells: a few thousand expansions for a 30 m crossing.
+    EXPECT_LT(r.expansions, 30000) << "seed " << seed;
+    std::printf("forest seed %u: route %.1f m (straight %.1f), %zu corners, %d expansions\n", seed, r.length_m,
+                (goal - start).norm(), r.path.size(), r.expansions);
+  }
+}
+
+TEST(GlobalRouter, RefusesBadInputAndStopsAtItsBudget) {
+  SyntheticScene scene = wallWithWindow(14.5, 1.5);
+  const EsdfMap& map = scene.finish();
+  GlobalRouter router{GlobalRouter::Config()};
+  EXPECT_EQ(router.route(map, {NAN, 1, 1}, {22, 8, 1.5}).status, SearchStatus::kInvalidInput);
+  EXPECT_EQ(router.route(map, {2, 8, 1.5}, {INFINITY, 8, 1.5}).status, SearchStatus::kInvalidInput);
+  EXPECT_EQ(router.route(map, {2, 8, 1.5}, {50, 8, 1.5}).status, SearchStatus::kOutOfMap);
+  GlobalRouter::Config c;
+  c.max_expansions = 100;
+  GlobalRouter small(c);
+  const GlobalRouter::Result r = small.route(map, {2, 8, 1.5}, {22, 8, 1.5});
+  EXPECT_EQ(r.status, SearchStatus::kBudgetExhausted);
+  EXPECT_EQ(r.expansions, 101);
+  std::string why;
+  c = GlobalRouter::Config();
+  c.heuristic_weight = 0.5;
+  EXPECT_FALSE(c.validate(&why));
+  EXPECT_NE(why.find("heuristic_weight"), std::string::npos);
+  EXPECT_EQ(GlobalRouter(c).route(map, {2, 8, 1.5}, {22, 8, 1.5}).status, SearchStatus::kInvalidInput);
+  c = GlobalRouter::Config();
+  c.cell_voxels = 9;
+  EXPECT_FALSE(c.validate(&why));
+  // The same router again after all that: the buffers are reset by generation, the answer is the same.
+  const GlobalRouter::Result a = router.route(map, {2, 8, 1.5}, {22, 8, 1.5});
+  const GlobalRouter::Result b = router.route(map, {2, 8, 1.5}, {22, 8, 1.5});
+  ASSERT_EQ(a.status, SearchStatus::kSuccess);
+  EXPECT_EQ(a.path, b.path);
+  EXPECT_EQ(a.expansions, b.expansions);
+}
+
+}  // namespace
+}  // namespace topo_planner
