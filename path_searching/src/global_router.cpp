@@ -19,6 +19,7 @@ bool GlobalRouter::Config::validate(std::string* why) const {
   if (!(heuristic_weight >= 1.0) || !std::isfinite(heuristic_weight)) return bad("route heuristic_weight must be >= 1");
   if (!(min_z_m < max_z_m)) return bad("route min_z_m must be below max_z_m");
   if (!(end_radius_m >= 0.0) || !std::isfinite(end_radius_m)) return bad("route end_radius_m must be finite and >= 0");
+  if (!(start_radius_m >= 0.0) || !std::isfinite(start_radius_m)) return bad("route start_radius_m must be finite and >= 0");
   if (!(end_clearance_m >= 0.0) || !(end_clearance_m <= clearance_m))
     return bad("route end_clearance_m must be in [0, clearance_m]");
   if (max_expansions < 1) return bad("route max_expansions must be >= 1");
@@ -38,6 +39,7 @@ GlobalRouter::Result GlobalRouter::route(const EsdfMap& map, const Eigen::Vector
   const VoxelBox window = geo.windowBox();
   const Eigen::Vector3i n = (window.size().array() + (k - 1)) / k;
   const size_t volume = size_t(n.x()) * size_t(n.y()) * size_t(n.z());
+  if (volume >= size_t(INT32_MAX)) return result;  // parents are int32 (a window of 2^31 cells is not a drone's)
   if (stamp_.size() < volume) {
     stamp_.assign(volume, 0u);
     cell_stamp_.assign(volume, 0u);
@@ -88,13 +90,17 @@ GlobalRouter::Result GlobalRouter::route(const EsdfMap& map, const Eigen::Vector
     return cell_distance_[a];
   };
   const double end_radius2 = config_.end_radius_m * config_.end_radius_m;
+  const double start_radius = std::max(config_.end_radius_m, config_.start_radius_m);
+  const double start_radius2 = start_radius * start_radius;
+  const Eigen::Vector3i cs = cellOf(start), ce = cellOf(goal);
   // Whether a cell may be entered, its best voxel's centre and distance.
   auto usable = [&](size_t a, const Eigen::Vector3i& c, Eigen::Vector3d* centre, float* distance) {
     // Relaxed near the ends: the band does not apply and the clearance is end_clearance_m. The
     // relaxation depends on the cell's centre only, so a cell's best voxel is the same either way
     // it is reached.
     const Eigen::Vector3d cell_centre = geo.centerOf(window.min + c * k) + Eigen::Vector3d::Constant(0.5 * (k - 1) * geo.resolution());
-    const bool relaxed = (cell_centre - start).squaredNorm() <= end_radius2 || (cell_centre - goal).squaredNorm() <= end_radius2;
+    const bool relaxed = c == cs || c == ce || (cell_centre - start).squaredNorm() <= start_radius2 ||
+                         (cell_centre - goal).squaredNorm() <= end_radius2;
     const float d = bestOf(a, c, relaxed);
     if (d < 0.0f) return false;
     *centre = geo.centerOf(voxelOf(c, cell_best_[a]));
@@ -102,15 +108,14 @@ GlobalRouter::Result GlobalRouter::route(const EsdfMap& map, const Eigen::Vector
     return d >= (relaxed ? config_.end_clearance_m : config_.clearance_m);
   };
 
-  const Eigen::Vector3i cs = cellOf(start), ce = cellOf(goal);
   const size_t as = address(cs), ae = address(ce);
   Eigen::Vector3d p;
   float d;
-  if (!usable(as, cs, &p, &d)) {
+  if (map.occupancy().isOccupied(geo.indexOf(start)) || !usable(as, cs, &p, &d)) {
     result.status = SearchStatus::kStartInObstacle;
     return result;
   }
-  if (!usable(ae, ce, &p, &d)) {
+  if (map.occupancy().isOccupied(geo.indexOf(goal)) || !usable(ae, ce, &p, &d)) {
     result.status = SearchStatus::kGoalInObstacle;
     return result;
   }

@@ -186,10 +186,10 @@ ReplanFsm::ReplanFsm(const Config& config, std::unique_ptr<TopoReplanner> replan
     : config_(config),
       replanner_(std::move(replanner)),
       router_(std::make_unique<GlobalRouter>(config.route)),
-      tight_router_(std::make_unique<GlobalRouter>([&] {
-        GlobalRouter::Config tight = config.route;
-        tight.clearance_m = tight.end_clearance_m;
-        return tight;
+      start_router_(std::make_unique<GlobalRouter>([&] {
+        GlobalRouter::Config c = config.route;
+        c.start_radius_m = std::max(c.start_radius_m, config.max_backoff_length_m + 1.0);
+        return c;
       }())),
       takeover_delay_s_(config.takeover_delay_s) {}
 
@@ -469,7 +469,10 @@ GoalStatus ReplanFsm::setGoals(const std::vector<Eigen::Vector3d>& goals) {
   goals_pending_ = true;
   new_mission_ = true;
   rerouting_ = false;
+  rerouted_since_success_ = false;
   route_stale_ = true;
+  ++goals_epoch_;
+  ++route_epoch_;
   return GoalStatus::kAccepted;
 }
 
@@ -844,14 +847,16 @@ void ReplanFsm::giveUpLocked(double t, const EsdfMap& map, GoalStatus status, Re
   last_goal_status_ = status;
   goals_.clear();
   next_goal_ = 0;
-  goals_pending_ = false;
+  if (rerouting_) goals_pending_ = false;  // the re-route of this mission; new goals (setGoals) stay pending
   rerouting_ = false;
+  rerouted_since_success_ = false;
   route_.clear();
   route_goals_.clear();
   consecutive_failures_ = 0;
-  const bool moving = current_ && !current_->manoeuvre() && t < current_->endTime();
+  const bool moving = current_ && !current_->braking && t < current_->endTime();
   if (moving) {
-    // A controlled stop along the current path; with no goals left the stop ends in WAIT_TARGET.
+    // A controlled stop along the current path (an escape or back-off under way is cut short too);
+    // with no goals left the stop ends in WAIT_TARGET.
     emergencyStopLocked(t, map, reason, out, nullptr, replan_status);
     out->event->fallback = "give_up";
     return;
@@ -867,7 +872,7 @@ void ReplanFsm::giveUpLocked(double t, const EsdfMap& map, GoalStatus status, Re
   setState(FsmState::kWaitTarget, out, reason);
 }
 
-void ReplanFsm::routeLocked(double t, const EsdfMap& map, std::unique_lock<std::mutex>* lock, FsmOutput* out) {
+bool ReplanFsm::routeLocked(double t, const EsdfMap& map, std::unique_lock<std::mutex>* lock, FsmOutput* out) {
   // Does this tick start (or rebuild) a reference, and through which goals?
   const bool at_rest = (!current_ || t >= current_->endTime()) && odom_velocity_.norm() < config_.stopped_speed_mps;
   bool starts = false;
@@ -879,12 +884,14 @@ void ReplanFsm::routeLocked(double t, const EsdfMap& map, std::unique_lock<std::
     case FsmState::kGenNewTraj: starts = true; break;
     case FsmState::kEmergencyStop: starts = at_rest && (goals_pending_ || !goals_.empty()); break;
   }
-  if (!starts) return;
+  if (!starts) return false;
   const std::vector<Eigen::Vector3d> goals = goals_pending_ ? pending_goals_ : remainingGoalsLocked();
-  if (goals.empty() || (!route_stale_ && goals == route_goals_)) return;
+  if (goals.empty() || (!route_stale_ && goals == route_goals_)) return false;
   for (const Eigen::Vector3d& g : goals)
-    if (!g.allFinite()) return;  // refused by startGoalsLocked
+    if (!g.allFinite()) return false;  // refused by startGoalsLocked
   const Eigen::Vector3d start = takeoverStateLocked(t + takeover_delay_s_).position;
+  const uint64_t epoch = route_epoch_;
+  const bool rerouting = rerouting_;
 
   // The search, with the mutex released: the safety thread and the inputs go on meanwhile.
   lock->unlock();
@@ -892,17 +899,16 @@ void ReplanFsm::routeLocked(double t, const EsdfMap& map, std::unique_lock<std::
   SearchStatus status = SearchStatus::kSuccess;
   size_t failed_leg = 0;
   int expansions = 0;
-  bool tight = false;  // some leg has a route only at the end clearance
+  bool near_start = false;  // some leg has a route only with the start region relaxed
   for (size_t i = 0; i < goals.size() && status == SearchStatus::kSuccess; ++i) {
     GlobalRouter::Result leg = router_->route(map, route.back(), goals[i]);
     expansions += leg.expansions;
-    if (leg.status == SearchStatus::kNoPath) {
+    if (leg.status == SearchStatus::kNoPath && i == 0) {
       // Not yet a proof: the vehicle may hover in a passage narrower than the route's clearance (a
-      // dead-end slot it was braked in) that the relaxed start region does not leave. Only when no
-      // way exists even at the end clearance is the goal unreachable.
-      leg = tight_router_->route(map, route.back(), goals[i]);
+      // dead-end slot it braked in) that the small relaxed start region does not leave.
+      leg = start_router_->route(map, route.back(), goals[i]);
       expansions += leg.expansions;
-      tight = tight || leg.status == SearchStatus::kSuccess;
+      near_start = leg.status == SearchStatus::kSuccess;
     }
     status = leg.status;
     failed_leg = i;
@@ -910,36 +916,42 @@ void ReplanFsm::routeLocked(double t, const EsdfMap& map, std::unique_lock<std::
   }
   lock->lock();
 
+  if (route_epoch_ != epoch) {
+    // New goals, a stop or an odometry jump meanwhile: the search answered another question.
+    return true;
+  }
   route_stale_ = false;
   route_goals_ = goals;
   failures_at_reroute_ = consecutive_failures_;
-  char text[200];
+  char text[240];
   if (status == SearchStatus::kSuccess) {
     route_ = std::move(route);
     out->new_route = true;
     std::snprintf(text, sizeof(text), "global route: %.1f m through %zu points (%d expansions)%s", pathLength(route_),
-                  route_.size(), expansions, tight ? ", narrower than its clearance in places" : "");
-  } else if (status == SearchStatus::kNoPath) {
+                  route_.size(), expansions,
+                  near_start ? ", narrower than its clearance near the vehicle" : "");
+  } else if (status == SearchStatus::kNoPath && config_.route.unknown_is_free) {
     // Both searches exhausted the map window: with unknown space free, no way to this goal exists.
     std::snprintf(text, sizeof(text),
-                  "goal %zu (%.2f, %.2f, %.2f) is unreachable in the known map: no route keeps even %.2f m from obstacles "
-                  "within the height band [%.2f, %.2f] m",
-                  failed_leg, goals[failed_leg].x(), goals[failed_leg].y(), goals[failed_leg].z(), config_.route.end_clearance_m,
-                  std::max(config_.route.min_z_m, map.geometry().windowMin().z()),
+                  "goal %zu (%.2f, %.2f, %.2f) is unreachable in the known map: no route keeps %.2f m from obstacles "
+                  "(except within %.1f m of the vehicle) within the height band [%.2f, %.2f] m",
+                  failed_leg, goals[failed_leg].x(), goals[failed_leg].y(), goals[failed_leg].z(), config_.route.clearance_m,
+                  start_router_->config().start_radius_m, std::max(config_.route.min_z_m, map.geometry().windowMin().z()),
                   std::min(config_.route.max_z_m, map.geometry().windowMax().z()));
     if (!out->message.empty()) out->message += "; ";
-    if (goals_pending_ && !rerouting_) {
+    if (goals_pending_ && !rerouting) {
       // New goals: refused like a goal in an obstacle (a mission in progress goes on).
       goals_pending_ = false;
       new_mission_ = false;
       last_goal_status_ = GoalStatus::kUnreachable;
       out->message += std::string("goal refused: ") + toString(GoalStatus::kUnreachable) + ": " + text;
-      return;
+      return true;
     }
     giveUpLocked(t, map, GoalStatus::kUnreachable, ReplanStatus::kNoPath, text, out);
-    return;
+    return true;
   } else {
-    // No proof either way (budget, start or goal inside the route's end clearance): straight references.
+    // No proof either way (budget, start or goal inside the route's end clearance, or unknown space
+    // not free to the route): straight references.
     route_.clear();
     out->new_route = true;
     std::snprintf(text, sizeof(text), "no global route (%s at goal %zu): references go straight through the goals",
@@ -947,6 +959,7 @@ void ReplanFsm::routeLocked(double t, const EsdfMap& map, std::unique_lock<std::
   }
   if (!out->message.empty()) out->message += "; ";
   out->message += text;
+  return true;
 }
 
 bool ReplanFsm::startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out) {
@@ -1022,6 +1035,7 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
   event.state = state_;
   event.position = request.start.position;
   if (!generating) setState(FsmState::kReplanTraj, out, toString(trigger));
+  const uint64_t goals_epoch = goals_epoch_;
 
   lock->unlock();
   ReplanResult result = replanner_->replan(map, request);
@@ -1070,6 +1084,7 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
     collision_ahead_ = false;
     consecutive_failures_ = 0;
     rerouted_since_success_ = false;
+    last_success_s_ = t;
     event.published = true;
     out->trajectory = traj;
     setState(FsmState::kExecTraj, out, "");
@@ -1087,9 +1102,9 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
       if (!config_.global_route && consecutive_failures_ >= config_.max_plan_failures) {
         event.fallback = "give_up";
         give_up_why = "no trajectory after " + std::to_string(consecutive_failures_) + " tries";
-      } else if (config_.global_route && t - mission_start_s_ > mission_limit_s_) {
+      } else if (config_.global_route && t - std::max(mission_start_s_, last_success_s_) > mission_limit_s_) {
         event.fallback = "give_up";
-        std::snprintf(text, sizeof(text), "no trajectory, and the mission's time limit of %.0f s has passed (%d tries in a row failed)",
+        std::snprintf(text, sizeof(text), "no trajectory for the mission's time limit of %.0f s (%d tries in a row failed)",
                       mission_limit_s_, consecutive_failures_);
         give_up_why = text;
       } else if (!late) {
@@ -1116,7 +1131,12 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
       escape = backoffTrajectoryLocked(t, map, &report);
       backoff = escape.has_value();
       escape_report += (escape_report.empty() ? "" : "; ") + report;
-      if (backoff) ++backoffs_;
+      if (backoff) {
+        ++backoffs_;
+        // The way back is used up: a later back-off goes on from where this one ends.
+        const Eigen::Vector3d end = escape->spline.evaluate(escape->spline.duration());
+        while (!flown_.empty() && (flown_.back() - end).norm() > 0.3) flown_.pop_back();
+      }
     }
     if (!escape && !escape_report.empty()) event.message += "; " + escape_report;
     // The way looks blocked (no guide path, no free local goal) or plans keep failing: re-route.
@@ -1127,7 +1147,9 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
       route_stale_ = true;
       rerouted_since_success_ = true;
       failures_at_reroute_ = consecutive_failures_;
-      if (!generating) {  // a moving vehicle: a new reference from the takeover state, next tick
+      if (!generating && goals_epoch_ == goals_epoch && !goals_pending_) {
+        // A moving vehicle: a new reference from the takeover state, next tick (unless new goals
+        // arrived while planning: they are flown instead).
         pending_goals_ = remainingGoalsLocked();
         goals_pending_ = !pending_goals_.empty();
         rerouting_ = goals_pending_;
@@ -1139,6 +1161,7 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
       consecutive_failures_ = 0;  // the escape is a new start: the tries after it are counted anew
       failures_at_reroute_ = 0;
       route_stale_ = true;
+      ++route_epoch_;
       collision_ahead_ = false;
       event.published = true;
       event.fallback = backoff ? "back_off" : "escape";
@@ -1190,16 +1213,19 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
     if (!out.message.empty()) out.message += "; ";
     out.message += "inputs fresh again";
   }
-  // The flown path, for back-offs: commanded positions (checked trajectories) 0.25 m apart.
-  if (current_) {
+  // The flown path, for back-offs: commanded positions (checked trajectories) 0.25 m apart; not
+  // the manoeuvres (a back-off would walk back along the previous one).
+  if (current_ && !current_->manoeuvre()) {
     const Eigen::Vector3d p = takeoverStateLocked(t).position;
     if (flown_.empty() || (p - flown_.back()).norm() >= 0.25) flown_.push_back(p);
     if (flown_.size() > 200) flown_.erase(flown_.begin(), flown_.begin() + 100);
   }
   if (config_.global_route) {
     const FsmState before = state_;
-    routeLocked(t, map, &lock, &out);
+    const bool searched = routeLocked(t, map, &lock, &out);
     if (out.event || state_ != before) return out;  // given up, or a braking took over meanwhile
+    // A long search: plan at the next tick, from then (a plan from t would start late).
+    if (searched && now && now() - t > 0.5 * takeover_delay_s_) return out;
   }
   switch (state_) {
     case FsmState::kInit:
@@ -1274,6 +1300,7 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
         // A new reference from rest is a new strategy: it gets its own max_plan_failures tries (the
         // failures of the replans that led here do not count against it).
         consecutive_failures_ = 0;
+        failures_at_reroute_ = 0;
         plan(t, map, FsmEvent::Trigger::kRetry, &lock, &out, now);
       } else {
         setState(FsmState::kWaitTarget, &out, "stopped, the mission's goals are no longer valid");
@@ -1300,6 +1327,7 @@ void ReplanFsm::emergencyStopLocked(double t, const EsdfMap& map, const std::str
   replaceCurrentLocked(brake);
   collision_ahead_ = false;
   route_stale_ = true;  // once stopped, the reference is rebuilt along a new route
+  ++route_epoch_;
   setState(FsmState::kEmergencyStop, out, event.message);
   out->trajectory = brake;
   out->event = event;
@@ -1337,6 +1365,7 @@ FsmOutput ReplanFsm::checkSafety(double t, const EsdfMap& map) {
     out.odometry_jumped = true;
     flown_.clear();  // in the old frame
     route_stale_ = true;
+    ++route_epoch_;
     return out;
   }
   // Braking and escapes were checked when made and are not replanned (they end at rest).

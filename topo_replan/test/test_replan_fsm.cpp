@@ -392,9 +392,48 @@ TEST(ReplanFsm, BacksOffOutOfADeadEndAndReroutes) {
     EXPECT_TRUE(log.goal_reached);
     EXPECT_GE(backoffs, 1);
     EXPECT_EQ(give_ups, 0);
+    // Every back-off leaves the slot: it ends where the search can start (not back in the slot, as
+    // one walking back along the previous back-off would).
+    for (const ExecTrajectory& tr : log.trajectories)
+      if (tr.escape && tr.spline.duration() > 0.5)
+        EXPECT_GE(after.query(tr.spline.evaluate(tr.spline.duration())).distance, config.escape_min_clearance_m);
     std::printf("dead end: goal reached in %.1f s after %d back-off(s), %zu planning calls\n", log.duration_s, backoffs,
                 log.events.size());
   }
+}
+
+// New goals given while a replan is running (the FSM's mutex is released then) are flown: a failed
+// replan's re-route of the old mission must not overwrite them, nor its give-up drop them.
+TEST(ReplanFsm, GoalsGivenWhileAReplanRunsAreFlown) {
+  Corridor before, after;
+  after.scene.box({11.0, -1.0, -1.0}, {11.4, 9.0, 4.0});  // closes the corridor: the old goal is unreachable
+  const EsdfMap& unknown = before.scene.finish();
+  const EsdfMap& revealed = after.scene.finish();
+  auto fsm = makeFsm();
+  PerfectVehicle vehicle{Eigen::Vector3d(1, 4, 1.5), Eigen::Vector3d::Zero(), {}};
+  ASSERT_TRUE(fsm->setOdometry(0.0, vehicle.position, vehicle.velocity));
+  fsm->setDepthFused(0.0);
+  ASSERT_EQ(fsm->setGoals({{22, 4, 1.5}}), GoalStatus::kAccepted);
+  const Eigen::Vector3d new_goal(3, 6, 1.5);
+  bool sent = false, reached = false;
+  for (int k = 0; k < 800 && !reached; ++k) {
+    const double t = 0.05 * k;
+    vehicle.follow(*fsm, t);
+    fsm->setOdometry(t, vehicle.position, vehicle.velocity);
+    fsm->setDepthFused(t);
+    const EsdfMap& map = vehicle.position.x() < 5.0 && !sent ? unknown : revealed;
+    fsm->checkSafety(t, map);
+    // The new goals arrive from "another thread" while the first replan that sees the wall runs.
+    auto now = [&] {
+      if (!sent && &map == &revealed) sent = fsm->setGoals({new_goal}) == GoalStatus::kAccepted;
+      return t;
+    };
+    const FsmOutput out = fsm->tick(t, map, now);
+    reached = out.goal_reached;
+  }
+  EXPECT_TRUE(sent);
+  EXPECT_TRUE(reached);
+  EXPECT_LT((vehicle.position - new_goal).norm(), 0.3);
 }
 
 // An obstacle revealed so late that braking at the planner's limit cannot stop before it: the

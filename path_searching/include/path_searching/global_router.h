@@ -12,8 +12,9 @@
 // 0.1 m), so the segment between them keeps at least clearance_m minus half that (0.04 m at the
 // defaults): the raw route never crosses an obstacle, and the shortening keeps clearance_m on every
 // shortcut it takes. The local planner checks every trajectory itself: the route is guidance.
-// Near the start and the goal (end_radius_m) a cell is free down to end_clearance_m and outside the
-// band: the vehicle may hover closer to an obstacle than the route's clearance.
+// Near the start and the goal (end_radius_m; start_radius_m around the start) a cell is free down to
+// end_clearance_m and outside the band: the vehicle may hover closer to an obstacle than the
+// route's clearance. The voxels of the start and the goal themselves must not be occupied.
 //
 // Cost. Edge length times 1 + clearance_weight * max(0, preferred_clearance_m - d) /
 // preferred_clearance_m, d the ESDF of the cell entered: the route keeps to the middle of openings
@@ -50,6 +51,7 @@ class GlobalRouter {
     double min_z_m = -1e9;                 ///< height band of the route (geofence) [m]
     double max_z_m = 1e9;
     double end_radius_m = 0.6;             ///< relaxed rules this close to the start and the goal [m]
+    double start_radius_m = 0.6;           ///< ... and this close to the start [m] (the larger applies)
     double end_clearance_m = 0.1;          ///< ... down to this clearance [m]
     int max_expansions = 1500000;          ///< budget
     int shortcut_lookahead = 24;           ///< shortening: raw points tried past the last visible one

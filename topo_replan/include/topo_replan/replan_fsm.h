@@ -39,9 +39,11 @@
 // search runs in tick() with the mutex released (it may take tens of milliseconds).
 //
 // No silent give-up (with global_route). A mission is given up only when the route search proves
-// a goal unreachable (no route through known and unknown space in its height band, neither at its
-// clearance nor at its end clearance: the FSM brakes if moving; a route found only at the end
-// clearance, e.g. out of a narrow slot the vehicle stopped in, is used as the route) or when the mission time limit has passed while plans fail; the
+// a goal unreachable (no route through known and unknown space in its height band at its
+// clearance, not even with the region within max_backoff_length_m + 1 m of the vehicle passable
+// at the route's end clearance, e.g. out of a narrow slot it braked in; with unknown space free to
+// the route; the FSM brakes if moving) or when the mission has had no successful plan for its
+// time limit; the
 // reason is in the event (fallback "give_up") and in GoalStatus. Before that, at rest, it changes
 // strategy: re-route (above), and after max_plan_failures failed plans, or when it cannot start
 // and no escape up the distance field exists, back off along the flown path (at most max_backoffs
@@ -253,8 +255,8 @@ class ReplanFsm {
     double max_backoff_length_m = 3.0;  ///< ... and on until escape_clearance_m from obstacles, up to this [m]
     double backoff_speed_mps = 1.0;     ///< peak speed of a back-off (the flown path is known free) [m/s]
     int max_backoffs = 3;               ///< back-offs per mission
-    /// A mission whose plans fail after this long is given up [s]; 0: 60 s or 4 times the duration
-    /// of its first reference, whichever is longer.
+    /// A mission with no successful plan for this long (since it started or since its last one) is
+    /// given up [s]; 0: 60 s or 4 times the duration of its first reference, whichever is longer.
     double mission_timeout_s = 0.0;
     /// A plan whose start velocity differs from the commanded one by more than this (the replanner
     /// could not restore it after time reallocation) is not published: setpoints never step [m/s].
@@ -363,7 +365,8 @@ class ReplanFsm {
                                                  double d0, double speed_mps, const char* what, std::string* report) const;
   /// The global route for the goals the next reference will go through, when it is stale (mutex
   /// released during the search); gives the mission up when the route proves a goal unreachable.
-  void routeLocked(double t, const EsdfMap& map, std::unique_lock<std::mutex>* lock, FsmOutput* out);
+  /// True when it searched.
+  bool routeLocked(double t, const EsdfMap& map, std::unique_lock<std::mutex>* lock, FsmOutput* out);
   /// Ends the mission for `why` (braking first when moving), with a give_up event.
   void giveUpLocked(double t, const EsdfMap& map, GoalStatus status, ReplanStatus replan_status, const std::string& why,
                     FsmOutput* out);
@@ -409,7 +412,7 @@ class ReplanFsm {
   int consecutive_failures_ = 0;
   // Global guidance and strategies.
   std::unique_ptr<GlobalRouter> router_;  // used by tick() only, outside the lock
-  std::unique_ptr<GlobalRouter> tight_router_;  // ... at the route's end clearance: the proof of unreachability
+  std::unique_ptr<GlobalRouter> start_router_;  // ... relaxed farther from the start: the proof of unreachability
   Path route_;                            // through route_goals_; empty: straight references
   std::vector<Eigen::Vector3d> route_goals_;
   bool route_stale_ = true;
@@ -420,6 +423,9 @@ class ReplanFsm {
   int backoffs_ = 0;                      // in this mission
   bool new_mission_ = false;              // set by setGoals: the next started reference begins a mission
   double mission_start_s_ = 0.0;
+  double last_success_s_ = -INFINITY;     // the last published plan [s]
+  uint64_t goals_epoch_ = 0;              // bumped by setGoals
+  uint64_t route_epoch_ = 0;              // bumped by setGoals, stops and odometry jumps: a route searched before is stale
   double mission_limit_s_ = INFINITY;
   double takeover_delay_s_;       // the adaptive takeover delay (tick() only writes it, under the mutex)
 };
