@@ -413,6 +413,7 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("fsm/max_backoff_length_m", f.max_backoff_length_m);
   r.read("fsm/backoff_speed_mps", f.backoff_speed_mps);
   r.read("fsm/max_backoffs", f.max_backoffs);
+  r.read("fsm/max_look_holds", f.max_look_holds);
   r.read("fsm/mission_timeout_s", f.mission_timeout_s);
   r.read("route/enabled", f.global_route);
   r.read("route/cell_voxels", f.route.cell_voxels);

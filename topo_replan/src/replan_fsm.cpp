@@ -151,6 +151,7 @@ bool ReplanFsm::Config::validate(std::string* why) const {
   if (!(backoff_length_m >= 0.0) || !(max_backoff_length_m >= backoff_length_m) || !(max_backoff_length_m <= 20.0))
     return bad("backoff lengths must satisfy 0 <= backoff_length_m <= max_backoff_length_m <= 20");
   if (max_backoffs < 0) return bad("max_backoffs must be >= 0");
+  if (max_look_holds < 1) return bad("max_look_holds must be >= 1");
   if (!(backoff_speed_mps > 0.0) || !std::isfinite(backoff_speed_mps)) return bad("backoff_speed_mps must be positive");
   if (!(mission_timeout_s >= 0.0) || std::isnan(mission_timeout_s)) return bad("mission_timeout_s must be >= 0 (0: automatic)");
   if (!(known_start_radius_m >= 0.0) || !(known_start_radius_m <= 2.0)) return bad("known_start_radius_m must be in [0, 2]");
@@ -621,7 +622,11 @@ ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::s
 }
 
 bool ReplanFsm::committable(const EsdfMap& map, const Eigen::Vector3d& p, const Eigen::Vector3d& start) const {
-  if ((p - start).norm() <= config_.known_start_radius_m) return true;
+  // Only around a hover the planner did not fly to (a mission's start, a re-anchoring): around any
+  // plan's start, each plan would commit known_start_radius_m further into unobserved space (a
+  // creep at a metre per second into space the camera cannot see, e.g. above or below it).
+  (void)start;
+  if (known_anchor_ && (p - *known_anchor_).norm() <= config_.known_start_radius_m) return true;
   const DistanceQuery q = map.query(p);
   return q.status == QueryStatus::kOk && q.distance >= config_.safety_clearance_m;
 }
@@ -984,6 +989,7 @@ bool ReplanFsm::startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out) {
   }
   // The reference starts from the state at which the first trajectory on it will take over.
   FlatState start = takeoverStateLocked(t + takeover_delay_s_);
+  if (state_ == FsmState::kInit || state_ == FsmState::kWaitTarget || !known_anchor_) known_anchor_ = start.position;
   start.jerk.setZero();  // the reference's jerk at the start is free of the spline's knots
   std::vector<Eigen::Vector3d> waypoints{start.position};
   // Through the global route when there is one for these goals (its first point is where the
@@ -1080,11 +1086,61 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
       traj.reference_end_s = traj.reference_start_s + frac * (traj.reference_end_s - traj.reference_start_s);
     }
     traj.ends_at_goal = !traj.stops_before_unknown && result.local_goal_time_s >= reference.duration() - 1e-6;
+    // A plan cut to a hold where the vehicle is (unknown space right ahead), again and again at the
+    // same place: turning to look has not shown the way (it may lie above or below the camera's
+    // view). Back off along the flown path, where the camera sees more, and re-route from there.
+    const bool look_hold = traj.stops_before_unknown && request.start.velocity.norm() < 0.05 &&
+                           (traj.spline.evaluate(traj.spline.duration()) - traj.spline.evaluate(0.0)).norm() < 0.05;
+    const bool same_place = look_holds_ > 0 && (request.start.position - look_hold_position_).norm() < 0.2;
+    look_holds_ = look_hold ? (same_place ? look_holds_ + 1 : 1) : 0;
+    if (look_hold && !same_place) look_hold_position_ = request.start.position;
+    std::optional<ExecTrajectory> backoff;
+    std::string backoff_report;
+    if (config_.global_route && look_holds_ >= config_.max_look_holds && backoffs_ < config_.max_backoffs) {
+      backoff = backoffTrajectoryLocked(t, map, &backoff_report);
+      if (backoff && backoff->has_heading_target) backoff.reset();  // a look again: no use
+    }
+    // Holding there is no progress: it does not restart the mission's time limit, and ends the
+    // mission when that passes.
+    if (look_hold && !backoff && config_.global_route &&
+        t - std::max(mission_start_s_, last_success_s_) > mission_limit_s_) {
+      char text[160];
+      std::snprintf(text, sizeof(text), "held at the edge of the known space, no way on for the mission's time limit of %.0f s",
+                    mission_limit_s_);
+      giveUpLocked(t, map, GoalStatus::kGivenUp, ReplanStatus::kSuccess, text, out);
+      event.fallback = "give_up";
+      event.message += (event.message.empty() ? "" : "; ") + out->event->message;
+      out->event = event;
+      out->plan = std::move(result);
+      return;
+    }
+    if (backoff) {
+      ++backoffs_;
+      look_holds_ = 0;
+      const Eigen::Vector3d end = backoff->spline.evaluate(backoff->spline.duration());
+      while (!flown_.empty() && (flown_.back() - end).norm() > 0.3) flown_.pop_back();
+      backoff->id = next_id_++;
+      replaceCurrentLocked(*backoff);
+      route_stale_ = true;
+      ++route_epoch_;
+      collision_ahead_ = false;
+      consecutive_failures_ = 0;
+      failures_at_reroute_ = 0;
+      event.published = true;
+      event.fallback = "back_off";
+      event.message += (event.message.empty() ? "" : "; ") + std::string("held at the edge of the known space ") +
+                       std::to_string(config_.max_look_holds) + " times; " + backoff_report;
+      out->trajectory = *backoff;
+      setState(FsmState::kEmergencyStop, out, backoff_report);
+      out->event = event;
+      out->plan = std::move(result);
+      return;
+    }
     replaceCurrentLocked(traj);
     collision_ahead_ = false;
     consecutive_failures_ = 0;
     rerouted_since_success_ = false;
-    last_success_s_ = t;
+    if (!look_hold) last_success_s_ = t;
     event.published = true;
     out->trajectory = traj;
     setState(FsmState::kExecTraj, out, "");
@@ -1320,6 +1376,7 @@ void ReplanFsm::emergencyStopLocked(double t, const EsdfMap& map, const std::str
   event.fallback = "stop";
   std::string report;
   ExecTrajectory brake = brakingTrajectory(t, map, &report, from);
+  if (from) known_anchor_ = from->position;  // a hold where the vehicle is measured (or the server holds)
   brake.id = next_id_++;
   event.position = brake.spline.evaluate(0.0);
   event.message = reason + "; " + report;

@@ -402,6 +402,69 @@ TEST(ReplanFsm, BacksOffOutOfADeadEndAndReroutes) {
   }
 }
 
+// The way on lies over a wall, through space the map has not observed; the plans are cut to a hold
+// at the edge of the known space, and turning (the hold's heading target) cannot show what is above.
+// After max_look_holds such holds the FSM backs off along the flown path; from farther back the
+// "camera" sees the space over the wall (the map reveals it once the vehicle is back at x < 7.5)
+// and the mission goes on. Without back-offs the vehicle holds at the wall until the time limit.
+TEST(ReplanFsm, BacksOffWhenHoldingAtTheEdgeOfTheKnownSpace) {
+  auto hall = [](bool over_known) {
+    Corridor c;
+    c.scene.box({10.0, -1.0, -1.0}, {10.4, 9.0, 2.0});
+    if (!over_known)
+      c.scene.fill([](const Eigen::Vector3d& p) { return p.x() >= 8.5 && p.x() <= 12.0 && p.z() >= 2.0; },
+                   VoxelState::kUnknown);
+    return c;
+  };
+  Corridor hidden_scene = hall(false), seen_scene = hall(true);
+  const EsdfMap& hidden = hidden_scene.scene.finish();
+  const EsdfMap& seen = seen_scene.scene.finish();
+  for (const int max_backoffs : {3, 0}) {
+    SCOPED_TRACE("max_backoffs " + std::to_string(max_backoffs));
+    bool was_at_wall = false, revealed = false;
+    auto mapAt = [&](double, const Eigen::Vector3d& p) -> const EsdfMap& {
+      was_at_wall = was_at_wall || p.x() > 8.0;
+      revealed = revealed || (was_at_wall && p.x() < 7.5);
+      return revealed ? seen : hidden;
+    };
+    ReplanFsm::Config config = testConfig();
+    config.max_backoffs = max_backoffs;
+    config.mission_timeout_s = 15.0;
+    auto fsm = makeFsm(config);
+    const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, mapAt, 1200, seen);
+    int backoffs = 0, holds = 0;
+    for (const FsmEvent& e : log.events) {
+      backoffs += e.fallback == "back_off";
+      holds += e.message.find("held at the edge of the known space") != std::string::npos;
+    }
+    EXPECT_TRUE(was_at_wall);
+    EXPECT_GT(log.min_clearance, config.safety_clearance_m);
+    expectContinuous(log.trajectories, config.max_start_velocity_step_mps + 1e-6);
+    // Nothing published enters space its map has not observed (plans used to creep into the space
+    // over the wall known_start_radius_m at a time, each counting the space around its own start as known).
+    int unobserved = 0;
+    for (size_t i = 0; i < log.trajectories.size(); ++i) {
+      const ExecTrajectory& tr = log.trajectories[i];
+      for (double tau = 0.0; tau <= tr.spline.duration(); tau += 0.02) {
+        const Eigen::Vector3d p = tr.spline.evaluate(tau);
+        unobserved += (p - Eigen::Vector3d(1, 4, 1.5)).norm() > config.known_start_radius_m &&
+                      log.trajectory_maps[i]->query(p).status != QueryStatus::kOk;
+      }
+    }
+    EXPECT_EQ(unobserved, 0);
+    if (max_backoffs == 0) {
+      EXPECT_FALSE(log.goal_reached);
+      EXPECT_EQ(backoffs, 0);
+      EXPECT_EQ(fsm->lastGoalStatus(), GoalStatus::kGivenUp);
+      continue;
+    }
+    EXPECT_EQ(backoffs, 1);
+    EXPECT_EQ(holds, 1);
+    EXPECT_TRUE(revealed);
+    EXPECT_TRUE(log.goal_reached);
+  }
+}
+
 // New goals given while a replan is running (the FSM's mutex is released then) are flown: a failed
 // replan's re-route of the old mission must not overwrite them, nor its give-up drop them.
 TEST(ReplanFsm, GoalsGivenWhileAReplanRunsAreFlown) {

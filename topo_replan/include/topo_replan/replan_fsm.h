@@ -46,8 +46,9 @@
 // time limit; the
 // reason is in the event (fallback "give_up") and in GoalStatus. Before that, at rest, it changes
 // strategy: re-route (above), and after max_plan_failures failed plans, or when it cannot start
-// and no escape up the distance field exists, back off along the flown path (at most max_backoffs
-// times per mission) and re-route from there. Without global_route, the mission is given up after
+// and no escape up the distance field exists, or when its plans have been cut to a hold at the same
+// place max_look_holds times (the way on lies in unknown space the camera does not see by turning),
+// back off along the flown path (at most max_backoffs times per mission) and re-route from there. Without global_route, the mission is given up after
 // max_plan_failures failed first plans.
 //
 // Known-space commitment (commit_to_known_space, FASTER's safe/committed split done along the
@@ -232,8 +233,9 @@ class ReplanFsm {
 
     // Known-space commitment (see the class comment).
     bool commit_to_known_space = true;  ///< false: publish plans through unknown space as planned (optimistic)
-    /// Path points this close to a trajectory's start count as known: the vehicle is there (or will be,
-    /// on a trajectory checked before), though the camera cannot see its own position [m].
+    /// Path points this close to where a mission started from a hover (or the vehicle was re-anchored)
+    /// count as known: the vehicle is there, though the camera cannot see its own position. Not around
+    /// every plan's start: plans would creep into unobserved space by this much each [m].
     double known_start_radius_m = 0.3;
     double commit_margin_m = 0.1;       ///< the committed stop ends this far before unknown space [m]
 
@@ -255,6 +257,9 @@ class ReplanFsm {
     double max_backoff_length_m = 3.0;  ///< ... and on until escape_clearance_m from obstacles, up to this [m]
     double backoff_speed_mps = 1.0;     ///< peak speed of a back-off (the flown path is known free) [m/s]
     int max_backoffs = 3;               ///< back-offs per mission
+    /// Plans cut to a hold at the same place (unknown space right ahead that turning to look does not
+    /// reveal) this many times in a row: back off along the flown path, where the camera sees more.
+    int max_look_holds = 5;
     /// A mission with no successful plan for this long (since it started or since its last one) is
     /// given up [s]; 0: 60 s or 4 times the duration of its first reference, whichever is longer.
     double mission_timeout_s = 0.0;
@@ -421,6 +426,11 @@ class ReplanFsm {
   int failures_at_reroute_ = 0;
   std::vector<Eigen::Vector3d> flown_;    // commanded positions 0.25 m apart, newest last (back-offs)
   int backoffs_ = 0;                      // in this mission
+  int look_holds_ = 0;                    // plans cut to a hold at look_hold_position_ in a row
+  // Where the vehicle hovers without having been flown there by a committed trajectory (a mission's
+  // start, a re-anchoring): the known-space commitment counts known_start_radius_m around it as known.
+  std::optional<Eigen::Vector3d> known_anchor_;
+  Eigen::Vector3d look_hold_position_ = Eigen::Vector3d::Zero();
   bool new_mission_ = false;              // set by setGoals: the next started reference begins a mission
   double mission_start_s_ = 0.0;
   double last_success_s_ = -INFINITY;     // the last published plan [s]
