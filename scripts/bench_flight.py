@@ -1,6 +1,21 @@
 #!/usr/bin/python3
-"""Closed-loop flight benchmark (make bench-flight): seeded forests at medium and high density, flown
-one after the other, headless, with the flight monitor; aggregates the reports.
+"""Closed-loop flight benchmark (make bench-flight): kinds of world and sensing, flown one after the
+other, headless, with the flight monitor; aggregates the reports.
+
+--suite worlds (the default): for each world style (forest at medium and high density; windows:
+full-width walls pierced by 1-3 windows; rings; boxes: floating 3-D boxes; mixed: short walls,
+rings and a window wall, all at medium density), each sensing profile (ideal; realistic: VIO noise,
+drift and latency seen by the mapping too, depth noise growing with range squared, invalid pixels;
+simulator.launch sensing:=) and seeds 1..N: path_searching's flight_world writes the world as an
+OctoMap and draws three goals, each either in the open (at the two ends, x = +-15) or beside
+obstacles (0.5-0.8 m from the nearest one, inside the area), verified reachable with the global
+route on the true map. The planner's window is the area's width in y (the walls close it). Files go
+to OUT/bench_flight/<style>_<sensing>_s<seed>*. Ends with
+  RESULT flights=... goals_reached_rate=... collisions=... failed_replan_rate=... mean_speed_mps=...
+         rate_<style>=... rate_<sensing>=... near_goals_rate=...
+
+--suite forests: the earlier benchmark, kept for comparison: seeded forests at medium and high
+density, goals in the open at the two ends of the forest, ideal sensing.
 
 Each flight: scripts/run_flight.sh with --density D --seed S --max-vel V and several goals: seeded
 random goals alternating between the two ends of the forest (x = +15 and x = -15, y in [-8, 8],
@@ -50,17 +65,20 @@ def random_goals(density, seed, n):
     return goals
 
 
-def run_flight(args, density, seed, out_dir):
-    name = f'{density}_s{seed}'
+def run_flight(args, density, seed, out_dir, name=None, goals=None, extra=(), style='forest'):
+    name = name or f'{density}_s{seed}'
     cmd = ['bash', os.path.join(ROOT, 'scripts', 'run_flight.sh'), '--density', density, '--seed', str(seed),
-           '--max-vel', str(args.max_vel), '--goal-timeout', str(args.goal_timeout), '--output-dir', out_dir,
-           '--name', name, '--rviz', 'false']
-    if not args.default_goals:
+           '--map-style', style, '--max-vel', str(args.max_vel), '--goal-timeout', str(args.goal_timeout),
+           '--output-dir', out_dir, '--name', name, '--rviz', 'false']
+    if goals is not None:
+        cmd += ['--goals', ' '.join(goals)]
+    elif not args.default_goals:
         cmd += ['--goals', ' '.join(str(g) for g in random_goals(density, seed, args.goals))]
     if args.no_plot:
         cmd.append('--no-plot')
     if args.sim_time:
         cmd += ['--sim-time', 'true']
+    cmd += list(extra)
     t0 = time.time()
     log_path = os.path.join(out_dir, name + '.log')
     with open(log_path, 'w') as log:
@@ -79,6 +97,27 @@ def run_flight(args, density, seed, out_dir):
         ms = [m for m in ms if not math.isnan(m)]
     return {'name': name, 'density': density, 'seed': seed, 'rc': rc, 'wall_s': wall, 'report': report,
             'replan_ms': ms, 'goals_total': report['goals_total'] if report else args.goals, 'log': log_path}
+
+
+def run_world_flight(args, style, density, sensing, seed, out_dir):
+    """One flight of the worlds suite: flight_world makes the map and the goals, run_flight flies them."""
+    name = f'{style}_{sensing}_s{seed}'
+    bt = os.path.join(out_dir, name + '.bt')
+    tool = os.path.join(args.ws, 'devel', 'lib', 'topo_planner', 'flight_world')
+    world = subprocess.run([tool, '--style', style, '--density', density, '--seed', str(seed), '--goals', str(args.goals),
+                            '--out', bt], capture_output=True, text=True)
+    lines = dict(l.split(' ', 1) for l in world.stdout.splitlines() if ' ' in l)
+    if world.returncode != 0 or 'GOALS' not in lines:
+        print(f'bench_flight: flight_world failed for {name}: {world.stderr.strip()}', flush=True)
+        return {'name': name, 'style': style, 'sensing': sensing, 'seed': seed, 'rc': world.returncode, 'wall_s': 0.0,
+                'report': None, 'replan_ms': [], 'goals_total': args.goals, 'kinds': [], 'log': bt}
+    goals = lines['GOALS'].split()
+    kinds = lines.get('KINDS', '').split()
+    extra = ['--', f'map_file:={bt}', f'sensing:={sensing}', 'map_origin:=[-20.0, -10.0, 0.3]',
+             'map_size:=[40.0, 20.0, 3.4]']
+    f = run_flight(args, density, seed, out_dir, name=name, goals=goals, extra=extra, style=style)
+    f.update({'style': style, 'sensing': sensing, 'kinds': kinds})
+    return f
 
 
 def aggregate(flights):
@@ -103,6 +142,9 @@ def aggregate(flights):
         'max_speed_mps': max(max_speeds) if max_speeds else math.nan,
         'replans': sum(f['report']['replans'] for f in flights if f['report']),
         'replan_failures': sum(f['report']['replan_failures'] for f in flights if f['report']),
+        'near_goals': sum(k == 'near' for f in flights for k in f.get('kinds', [])),
+        'near_reached': sum(1 for f in flights if f['report'] for g, k in zip(f['report'].get('goals', []), f.get('kinds', []))
+                            if k == 'near' and g.get('reached')),
         'replan_ms_median': percentile(ms, 0.5),
         'replan_ms_p95': percentile(ms, 0.95),
         'duration_s': sum(num(f['report']['duration_s']) for f in flights if f['report']) / max(
@@ -145,6 +187,82 @@ def flight_table(flights):
     return lines
 
 
+def fmt_failed(a):
+    return a['replan_failures'] / a['replans'] if a['replans'] else 0.0
+
+
+def worlds_suite(args):
+    if args.seeds == 10:
+        args.seeds = 3  # the worlds suite's default: 6 styles x 2 sensing profiles x 3 seeds = 36 flights
+    out_dir = os.path.join(args.out, 'bench_flight')
+    os.makedirs(out_dir, exist_ok=True)
+    styles = [s.split('-') if '-' in s else [s, 'medium'] for s in args.styles.split(',') if s]
+    sensings = [s for s in args.sensing.split(',') if s]
+    cases = [(st, de, se, seed) for st, de in styles for se in sensings for seed in range(1, args.seeds + 1)]
+    print(f'bench_flight: {len(cases)} flights (styles {args.styles}; sensing {args.sensing}; seeds 1..{args.seeds}), '
+          f'max_vel {args.max_vel} m/s, {args.goals} goals each; files in {out_dir}', flush=True)
+    flights = []
+    for st, de, se, seed in cases:
+        style = st if st != 'forest' else f'forest'
+        f = run_world_flight(args, style, de, se, seed, out_dir)
+        f['group'] = f'{st}-{de}' if st == 'forest' else st
+        flights.append(f)
+        r = f['report']
+        label = f"{f['group']}/{se}/s{seed}"
+        if r:
+            print(f"[{len(flights):2d}/{len(cases)}] {label:28s} {'ok  ' if r['success'] else 'FAIL'} "
+                  f"goals {r['goals_reached']}/{r['goals_total']} ({' '.join(f['kinds'])}) collisions {r['collisions']} "
+                  f"min clearance {fmt(num(r['min_clearance_m']))} m speed {fmt(num(r['mean_speed_mps']))} m/s "
+                  f"replans {r['replans']} ({r['replan_failures']} failed) p95 {fmt(num(r['replan_ms_p95']), 1)} ms "
+                  f"(wall {f['wall_s']:.0f} s){'' if r['success'] else ': ' + r['message']}", flush=True)
+        else:
+            print(f"[{len(flights):2d}/{len(cases)}] {label:28s} NO REPORT (exit {f['rc']}, see {f['log']})", flush=True)
+
+    groups = []
+    group_names = list(dict.fromkeys(f['group'] for f in flights))
+    for g in group_names:
+        for se in sensings:
+            groups.append((f'{g} / {se}', aggregate([f for f in flights if f['group'] == g and f['sensing'] == se])))
+    per_style = [(g, aggregate([f for f in flights if f['group'] == g])) for g in group_names]
+    per_sensing = [(se, aggregate([f for f in flights if f['sensing'] == se])) for se in sensings]
+    overall = aggregate(flights)
+    def table(rows):
+        lines = ['| group | flights | goals reached | rate | near goals reached | collisions | failed replans | '
+                 'min clearance [m] | mean speed [m/s] | replan median / p95 [ms] |',
+                 '|---|---|---|---|---|---|---|---|---|---|']
+        for label, a in rows:
+            lines.append(f"| {label} | {a['flights']} | {a['goals_reached']}/{a['goals_total']} | {fmt(a['goals_reached_rate'], 3)} | "
+                         f"{a['near_reached']}/{a['near_goals']} | {a['collisions']} | {a['replan_failures']}/{a['replans']} "
+                         f"({100 * fmt_failed(a):.1f}%) | {fmt(a['min_clearance_m'])} | {fmt(a['mean_speed_mps'])} | "
+                         f"{fmt(a['replan_ms_median'], 1)} / {fmt(a['replan_ms_p95'], 1)} |")
+        return lines
+    md = ['# Closed-loop flight benchmark: kinds of world and sensing', '',
+          f'{len(flights)} flights: styles {args.styles}, sensing {args.sensing}, seeds 1..{args.seeds}, max_vel '
+          f'{args.max_vel} m/s, {args.goals} goals each (in the open or 0.5-0.8 m beside obstacles, verified reachable '
+          f'with the global route on the true map), goal timeout {args.goal_timeout:.0f} s. Failed replans: planning '
+          'calls that published nothing, over all calls.', '', '## Per style and sensing', '']
+    md += table(groups)
+    md += ['', '## Per style', ''] + table(per_style)
+    md += ['', '## Per sensing', ''] + table(per_sensing + [('overall', overall)])
+    md += ['', '## Flights', ''] + flight_table(flights)
+    rates = ' '.join(f"rate_{g.replace('-', '_')}={a['goals_reached_rate']:.3f}" for g, a in per_style)
+    rates += ' ' + ' '.join(f"rate_{se}={a['goals_reached_rate']:.3f}" for se, a in per_sensing)
+    near = overall['near_reached'] / overall['near_goals'] if overall['near_goals'] else 0.0
+    result = (f"RESULT flights={overall['flights']} goals_reached_rate={overall['goals_reached_rate']:.3f} "
+              f"collisions={overall['collisions']} failed_replan_rate={fmt_failed(overall):.3f} "
+              f"mean_speed_mps={fmt(overall['mean_speed_mps'], 2)} near_goals_rate={near:.3f} {rates} "
+              f"replan_ms_median={overall['replan_ms_median']:.2f} replan_ms_p95={overall['replan_ms_p95']:.2f}")
+    md += ['', '```', result, '```', '']
+    md_path = os.path.join(args.out, 'bench_flight.md')
+    with open(md_path, 'w') as f:
+        f.write('\n'.join(md))
+    print()
+    print('\n'.join(table(per_style + per_sensing + [('overall', overall)])))
+    print(f'bench_flight: wrote {md_path}')
+    print(result)
+    return 0
+
+
 def main(argv):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument('--out', default=os.path.join(ROOT, 'results'), help='results directory')
@@ -156,9 +274,16 @@ def main(argv):
     ap.add_argument('--goal-timeout', type=float, default=90.0)
     ap.add_argument('--sim-time', action='store_true', help='run the simulations on simulated time')
     ap.add_argument('--no-plot', action='store_true', help='no PNG per flight')
+    ap.add_argument('--suite', default='worlds', choices=['worlds', 'forests'])
+    ap.add_argument('--styles', default='forest-medium,forest-high,windows,rings,boxes,mixed',
+                    help='worlds suite: style[-density] list (density medium unless given)')
+    ap.add_argument('--sensing', default='ideal,realistic', help='worlds suite: sensing profiles')
     args = ap.parse_args(argv[1:])
+    args.ws = os.environ.get('WS', os.path.join(ROOT, 'build', 'ws'))
     if args.default_goals:
         args.goals = 3
+    if args.suite == 'worlds':
+        return worlds_suite(args)
 
     out_dir = os.path.join(args.out, 'bench_flight')
     os.makedirs(out_dir, exist_ok=True)

@@ -21,6 +21,7 @@ const char* toString(ForestObstacle::Kind kind) {
     case ForestObstacle::Kind::kBox: return "box";
     case ForestObstacle::Kind::kWall: return "wall";
     case ForestObstacle::Kind::kRing: return "ring";
+    case ForestObstacle::Kind::kWindowWall: return "window_wall";
   }
   return "?";
 }
@@ -42,6 +43,13 @@ bool ForestObstacle::contains(const Eigen::Vector3d& p) const {
       const Eigen::Vector3d axis(std::cos(yaw_rad), std::sin(yaw_rad), 0.0);
       const double a = d.dot(axis), radial = (d - a * axis).norm() - radius_m;
       return radial * radial + a * a <= tube_radius_m * tube_radius_m;
+    }
+    case Kind::kWindowWall: {
+      if (!(std::abs(d.x()) <= half_size.x() && std::abs(d.y()) <= half_size.y() && d.z() >= 0.0 && d.z() <= half_size.z()))
+        return false;
+      for (const Eigen::Vector4d& o : openings)
+        if (std::abs(p.y() - o[0]) <= o[2] && std::abs(p.z() - o[1]) <= o[3]) return false;
+      return true;
     }
   }
   return false;
@@ -75,6 +83,9 @@ bool ForestConfig::validate(std::string* why) const {
   if (!(std::isfinite(ring_z_min_m) && std::isfinite(ring_z_max_m) && ring_z_min_m <= ring_z_max_m))
     err << "need ring_z_min_m <= ring_z_max_m; ";
   if (!(std::isfinite(keep_free_radius_m) && keep_free_radius_m >= 0.0)) err << "keep_free_radius_m must be >= 0; ";
+  if (window_walls < 0 || window_walls > 100) err << "window_walls must be in [0, 100]; ";
+  if (windows_min < 1 || windows_max < windows_min || windows_max > 20) err << "need 1 <= windows_min <= windows_max <= 20; ";
+  if (!range_ok(window_size_min_m, window_size_max_m)) err << "need 0 < window_size_min_m <= window_size_max_m; ";
   for (const Eigen::Vector3d& k : keep_free)
     if (!k.allFinite()) {
       err << "keep_free points must be finite; ";
@@ -181,6 +192,48 @@ int generateForest(const ForestConfig& config, uint32_t seed, OccupancyMap* map,
     const double reach = o.radius_m + o.tube_radius_m;
     if (!keepsFree(o.center, reach, false)) continue;
     fillShape(o, o.center - Eigen::Vector3d::Constant(reach), o.center + Eigen::Vector3d::Constant(reach));
+    ++placed;
+  }
+  // Window walls: evenly spaced in x (jittered by a fifth of the spacing), each across the whole
+  // window in y; a wall that would pass within the keep-free radius of a kept point is moved off it.
+  const double spacing = config.window_walls > 0 ? (hi.x() - lo.x()) / config.window_walls : 0.0;
+  for (int k = 0; k < config.window_walls; ++k) {
+    ForestObstacle o;
+    o.kind = ForestObstacle::Kind::kWindowWall;
+    double x = lo.x() + (k + 0.5 + 0.2 * (u01(rng) - 0.5)) * spacing;
+    const double ht = 0.5 * config.wall_thickness_m;
+    for (const Eigen::Vector3d& kf : config.keep_free)
+      if (std::abs(x - kf.x()) < ht + config.keep_free_radius_m)
+        x = kf.x() + (x >= kf.x() ? 1.0 : -1.0) * (ht + config.keep_free_radius_m + 0.05);
+    o.center = Eigen::Vector3d(x, 0.5 * (lo.y() + hi.y()), config.ground_z_m);
+    o.half_size = Eigen::Vector3d(ht, 0.5 * (hi.y() - lo.y()), config.pillar_height_m);
+    const int n = config.windows_min + int(u01(rng) * (config.windows_max - config.windows_min + 1) * 0.999999);
+    for (int j = 0; j < n; ++j) {
+      const double w = config.window_size_min_m + u01(rng) * (config.window_size_max_m - config.window_size_min_m);
+      const double h = config.window_size_min_m + u01(rng) * (config.window_size_max_m - config.window_size_min_m);
+      const double y_lo = lo.y() + 0.5 * w + 0.3, y_hi = hi.y() - 0.5 * w - 0.3;
+      const double z_lo = config.ground_z_m + 0.4 + 0.5 * h, z_hi = config.ground_z_m + config.pillar_height_m - 0.4 - 0.5 * h;
+      const double y = y_lo < y_hi ? y_lo + u01(rng) * (y_hi - y_lo) : 0.5 * (lo.y() + hi.y());
+      const double z = z_lo < z_hi ? z_lo + u01(rng) * (z_hi - z_lo) : config.ground_z_m + 0.5 * config.pillar_height_m;
+      o.openings.emplace_back(y, z, 0.5 * w, 0.5 * h);
+    }
+    // The openings are cut through whatever stands in the wall's slab too (pillars, boxes): a window is a window.
+    const Eigen::Vector3i a = g.indexOf(Eigen::Vector3d(x - ht, lo.y(), config.ground_z_m)).cwiseMax(w.min);
+    const Eigen::Vector3i b =
+        g.indexOf(Eigen::Vector3d(x + ht, hi.y(), config.ground_z_m + config.pillar_height_m)).cwiseMin(w.max);
+    Eigen::Vector3i v;
+    for (v.z() = a.z(); v.z() <= b.z(); ++v.z())
+      for (v.y() = a.y(); v.y() <= b.y(); ++v.y())
+        for (v.x() = a.x(); v.x() <= b.x(); ++v.x()) {
+          const Eigen::Vector3d p = g.centerOf(v);
+          if (o.contains(p)) {
+            map->setState(v, VoxelState::kOccupied);
+          } else if (std::abs(p.x() - x) <= ht) {
+            for (const Eigen::Vector4d& op : o.openings)
+              if (std::abs(p.y() - op[0]) <= op[2] && std::abs(p.z() - op[1]) <= op[3]) map->setState(v, VoxelState::kFree);
+          }
+        }
+    record(o);
     ++placed;
   }
   return placed;

@@ -153,6 +153,61 @@ TEST(MapGenerator, WallsAndRingsAreRasterisedExactly) {
   });
 }
 
+// Window walls close the whole window in y except their openings, which are cut through any
+// pillar or box in the slab; the walls keep off the kept points.
+TEST(MapGenerator, WindowWallsCloseTheWindowExceptTheirOpenings) {
+  ForestConfig f = ForestConfig::preset(ObstacleDensity::kMedium);
+  f.window_walls = 2;
+  f.keep_free = {{-11.0, 0.0, 1.0}};
+  f.keep_free_radius_m = 1.5;
+  auto map = forestWindow();
+  std::vector<ForestObstacle> placed;
+  generateForest(f, 5, map.get(), &placed);
+  std::vector<ForestObstacle> walls;
+  for (const ForestObstacle& o : placed)
+    if (o.kind == ForestObstacle::Kind::kWindowWall) walls.push_back(o);
+  ASSERT_EQ(walls.size(), 2u);
+  const GridGeometry& g = map->geometry();
+  for (const ForestObstacle& o : walls) {
+    EXPECT_GE(int(o.openings.size()), f.windows_min);
+    EXPECT_LE(int(o.openings.size()), f.windows_max);
+    EXPECT_GT(std::abs(o.center.x() - f.keep_free[0].x()), f.keep_free_radius_m);
+    // Along the wall's centre plane: occupied exactly outside the openings (whatever else stands there).
+    size_t mismatches = 0, free_cells = 0;
+    for (double y = -9.95; y < 10.0; y += 0.1)
+      for (double z = 0.05; z < 3.0; z += 0.1) {
+        const Eigen::Vector3i i = g.indexOf(Eigen::Vector3d(o.center.x(), y, z));
+        const Eigen::Vector3d c = g.centerOf(i);
+        bool in_opening = false;
+        for (const Eigen::Vector4d& op : o.openings)
+          in_opening = in_opening || (std::abs(c.y() - op[0]) <= op[2] && std::abs(c.z() - op[1]) <= op[3]);
+        mismatches += map->isOccupied(i) == in_opening;
+        mismatches += o.contains(c) == in_opening;
+        free_cells += in_opening;
+      }
+    EXPECT_EQ(mismatches, 0u);
+    EXPECT_GT(free_cells, size_t(0.8 * 0.8 / 0.01 * 0.5));
+    for (const Eigen::Vector4d& op : o.openings) {
+      EXPECT_GE(2.0 * op[2], f.window_size_min_m - 1e-9);
+      EXPECT_LE(2.0 * op[2], f.window_size_max_m + 1e-9);
+    }
+  }
+  // The pillars and boxes are those of the same seed without window walls (they draw after them).
+  ForestConfig plain = f;
+  plain.window_walls = 0;
+  std::vector<ForestObstacle> before;
+  auto a = forestWindow();
+  generateForest(plain, 5, a.get(), &before);
+  ASSERT_EQ(before.size() + walls.size(), placed.size());
+  for (size_t k = 0; k < before.size(); ++k) {
+    EXPECT_EQ(before[k].kind, placed[k].kind);
+    EXPECT_EQ(before[k].center, placed[k].center);
+  }
+  std::string why;
+  plain.windows_min = 0;
+  EXPECT_FALSE(plain.validate(&why));
+}
+
 TEST(MapGenerator, ValidateRefusesBadConfigs) {
   std::string why;
   EXPECT_TRUE(ForestConfig().validate(&why)) << why;

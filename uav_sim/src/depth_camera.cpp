@@ -103,9 +103,14 @@ bool DepthCamera::render(const Eigen::Isometry3d& T_world_camera, std::vector<fl
   else
     rasterize(T_world_camera, depth);
   // Noise and the minimum range, shared by both renderers (same draws for the same hits).
-  const bool noisy = config_.noise_stddev_at_1m > 0.0;
+  const bool noisy = config_.noise_stddev_at_1m > 0.0, holes = config_.invalid_fraction > 0.0;
   std::normal_distribution<float> noise(0.0f, 1.0f);
+  std::uniform_real_distribution<float> u01(0.0f, 1.0f);
   for (float& out : *depth) {
+    if (holes && u01(rng_) < config_.invalid_fraction) {
+      out = NAN;
+      continue;
+    }
     if (!std::isfinite(out)) continue;
     double z = out;
     if (noisy) z += config_.noise_stddev_at_1m * z * z * noise(rng_);

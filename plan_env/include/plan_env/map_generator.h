@@ -5,7 +5,9 @@
 // benchmarks, so their figures are comparable.
 //
 // Optional kinds for the simulator, off by default: walls (thin vertical slabs standing on the
-// ground, random heading) and rings (floating vertical tori, like racing gates). They are placed
+// ground, random heading), rings (floating vertical tori, like racing gates) and window walls
+// (slabs across the whole window in y, evenly spaced in x, each pierced by rectangular windows:
+// rooms and halls, where the way on is through an opening that may lie anywhere). They are placed
 // after the pillars and boxes and draw random numbers only when their density is non-zero, so a
 // seed gives the same pillars and boxes with or without them (and the benchmark maps are unchanged).
 //
@@ -46,6 +48,11 @@ struct ForestConfig {
   double ring_tube_radius_m = 0.1;     ///< half the thickness of the ring's tube [m]
   double ring_z_min_m = 1.0;           ///< ring centre height range [m]
   double ring_z_max_m = 2.0;
+  int window_walls = 0;                ///< full-width walls across x, pierced by windows (0 = none)
+  int windows_min = 1;                 ///< windows per wall, range
+  int windows_max = 3;
+  double window_size_min_m = 0.8;      ///< window width and height, each drawn in this range [m]
+  double window_size_max_m = 1.5;
   /// Points kept obstacle-free (e.g. a start), with the radius kept free around them [m].
   std::vector<Eigen::Vector3d> keep_free;
   double keep_free_radius_m = 0.8;
@@ -59,16 +66,19 @@ struct ForestConfig {
 
 /// One obstacle as placed by generateForest (solid shape, world frame).
 struct ForestObstacle {
-  enum class Kind { kPillar, kBox, kWall, kRing };
+  enum class Kind { kPillar, kBox, kWall, kRing, kWindowWall };
   Kind kind = Kind::kPillar;
   /// Pillar, wall: centre of the footprint on the ground; box, ring: centre [m].
   Eigen::Vector3d center = Eigen::Vector3d::Zero();
-  /// Box: half edges; wall: half length (along the heading), half thickness, height [m].
+  /// Box: half edges; wall: half length (along the heading), half thickness, height [m]; window
+  /// wall: half thickness (x), half span (y), height [m].
   Eigen::Vector3d half_size = Eigen::Vector3d::Zero();
   double radius_m = 0.0;       ///< pillar radius; ring centre-line radius [m]
   double height_m = 0.0;       ///< pillar height [m]
   double tube_radius_m = 0.0;  ///< ring tube radius [m]
   double yaw_rad = 0.0;        ///< wall: direction of its length; ring: direction of its axis [rad]
+  /// Window wall: its openings, each (y, z) of the centre and the half width, half height [m].
+  std::vector<Eigen::Vector4d> openings;
 
   /// True if p lies in the solid shape. Walls and rings are rasterised exactly so (a voxel is
   /// occupied when its centre is inside); pillars and boxes cover, as they always have, the voxels

@@ -56,6 +56,7 @@ class DepthCamera {
     double min_range_m = 0.1;       ///< closer surfaces (depth z) read as invalid (NaN) [m]
     double max_range_m = 6.0;       ///< surfaces further along the ray than this read as +inf (no return) [m]
     double noise_stddev_at_1m = 0.0;  ///< depth noise sigma at 1 m, scaling with depth^2 [m]
+    double invalid_fraction = 0.0;  ///< pixels read as invalid (NaN) at random: a stereo sensor's holes, in [0, 1)
     uint32_t seed = 1;              ///< noise generator seed
     Method method = Method::kRasterize;  ///< renderer (same image; see the class comment)
   };

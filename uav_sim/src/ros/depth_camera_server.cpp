@@ -44,6 +44,7 @@ bool DepthCameraServer::Config::validate(std::string* why) const {
     err << "need 0 <= min_range_m < max_range_m <= 1000; ";
   if (!(std::isfinite(camera.noise_stddev_at_1m) && camera.noise_stddev_at_1m >= 0.0))
     err << "noise_stddev_at_1m must be >= 0; ";
+  if (!(camera.invalid_fraction >= 0.0 && camera.invalid_fraction < 1.0)) err << "invalid_fraction must be in [0, 1); ";
   if (!scenario.validate(&core)) err << core << "; ";
   if (!(finitePositive(rate_hz) && rate_hz >= 0.01 && rate_hz <= 1000.0)) err << "rate_hz must be in [0.01, 1000]; ";
   if (!T_body_camera.matrix().allFinite()) err << "extrinsic must be finite; ";
@@ -91,6 +92,8 @@ bool readDepthCameraParams(const ros::NodeHandle& pnh, DepthCameraServer::Config
   r.read("min_range_m", c.camera.min_range_m);
   r.read("max_range_m", c.camera.max_range_m);
   r.read("noise_stddev_at_1m", c.camera.noise_stddev_at_1m);
+  r.read("invalid_fraction", c.camera.invalid_fraction);
+  r.read("render_from_truth", c.render_from_truth);
   r.readUnsigned("seed", c.camera.seed);
   r.readTransform("extrinsic", c.T_body_camera);
   r.read("world_frame", c.world_frame);
@@ -126,6 +129,9 @@ std::unique_ptr<DepthCameraServer> DepthCameraServer::create(const ros::NodeHand
   s->blackout_sub_ = s->nh_.subscribe("quadrotor_sim/depth_blackout", 10, &DepthCameraServer::blackoutCallback, s.get());
   s->offset_sub_ = s->nh_.subscribe("quadrotor_sim/odom_offset", 10, &DepthCameraServer::offsetCallback, s.get(),
                                     ros::TransportHints().tcpNoDelay());
+  if (config.render_from_truth)
+    s->truth_sub_ = s->nh_.subscribe("quadrotor_sim/ground_truth", 400, &DepthCameraServer::truthCallback, s.get(),
+                                     ros::TransportHints().tcpNoDelay());
   // The render thread: the map build and the frames.
   ros::NodeHandle render_nh(s->nh_);
   render_nh.setCallbackQueue(&s->render_queue_);
@@ -147,6 +153,13 @@ std::unique_ptr<DepthCameraServer> DepthCameraServer::create(const ros::NodeHand
 void DepthCameraServer::odomCallback(const nav_msgs::OdometryConstPtr& msg) {
   std::lock_guard<std::mutex> lock(odom_mutex_);
   latest_odom_ = msg;
+}
+
+void DepthCameraServer::truthCallback(const nav_msgs::OdometryConstPtr& msg) {
+  std::lock_guard<std::mutex> lock(odom_mutex_);
+  truth_poses_.push_back(msg);
+  while (truth_poses_.size() > 1 && (msg->header.stamp - truth_poses_.front()->header.stamp).toSec() > 2.0)
+    truth_poses_.pop_front();
 }
 
 void DepthCameraServer::blackoutCallback(const std_msgs::BoolConstPtr& msg) {
@@ -178,7 +191,7 @@ void DepthCameraServer::renderCallback(const ros::TimerEvent&) {
     camera_ = std::make_unique<DepthCamera>(config_.camera, map->esdf());
     camera_map_ = map;
   }
-  nav_msgs::OdometryConstPtr odom;
+  nav_msgs::OdometryConstPtr odom, truth;
   bool blackout;
   Eigen::Vector3d offset;
   {
@@ -186,6 +199,13 @@ void DepthCameraServer::renderCallback(const ros::TimerEvent&) {
     odom = latest_odom_;
     blackout = blackout_;
     offset = odom_offset_;
+    // The true pose at the estimate's stamp (the simulator publishes both from the same step).
+    if (odom && config_.render_from_truth)
+      for (auto it = truth_poses_.rbegin(); it != truth_poses_.rend(); ++it)
+        if (std::abs(((*it)->header.stamp - odom->header.stamp).toSec()) < 1e-4) {
+          truth = *it;
+          break;
+        }
   }
   if (!odom || odom->header.stamp == last_rendered_stamp_) return;  // nothing new to see
   if (blackout) {
@@ -212,6 +232,17 @@ void DepthCameraServer::renderCallback(const ros::TimerEvent&) {
   const Eigen::Isometry3d T_world_camera = T_world_body * config_.T_body_camera;  // as the estimator says
   Eigen::Isometry3d T_true_body = T_world_body;  // where the camera really is (odometry jumps removed)
   T_true_body.translation() -= offset;
+  if (config_.render_from_truth) {
+    // Noise and drift of the estimate are not where the camera is: render from the true pose, send
+    // the estimate's (what a VIO gives the mapping).
+    Quadrotor::State true_body;
+    if (!truth || !odometryToState(*truth, false, &true_body, &why)) {
+      ROS_WARN_THROTTLE(5.0, "depth_camera: no true pose at the odometry's stamp: no frame");
+      return;
+    }
+    T_true_body.linear() = true_body.orientation.toRotationMatrix();
+    T_true_body.translation() = true_body.position;
+  }
 
   const auto t0 = std::chrono::steady_clock::now();
   if (!camera_->render(T_true_body * config_.T_body_camera, &depth_)) return;

@@ -65,8 +65,10 @@ bool readMapGeneratorParams(const ros::NodeHandle& nh, MapGeneratorServer::Confi
     f.rings_per_m2 = 0.02;
   } else if (c.style == "mixed") {
     f.walls_per_m2 = f.rings_per_m2 = 0.01;
+  } else if (c.style == "windows") {
+    f.window_walls = 2;
   } else if (c.style != "forest") {
-    r.errors() << "style must be forest, walls, rings or mixed, not '" << c.style << "'; ";
+    r.errors() << "style must be forest, walls, rings, mixed or windows, not '" << c.style << "'; ";
   }
   r.read("pillars_per_m2", f.pillars_per_m2);
   r.read("floating_per_m2", f.floating_per_m2);
@@ -86,6 +88,11 @@ bool readMapGeneratorParams(const ros::NodeHandle& nh, MapGeneratorServer::Confi
   r.read("ring_tube_radius_m", f.ring_tube_radius_m);
   r.read("ring_z_min_m", f.ring_z_min_m);
   r.read("ring_z_max_m", f.ring_z_max_m);
+  r.read("window_walls", f.window_walls);
+  r.read("windows_min", f.windows_min);
+  r.read("windows_max", f.windows_max);
+  r.read("window_size_min_m", f.window_size_min_m);
+  r.read("window_size_max_m", f.window_size_max_m);
   r.readUnsigned("seed", c.seed);
   r.readVector3("area_min_m", c.area_min_m);
   r.readVector3("area_max_m", c.area_max_m);

@@ -74,7 +74,8 @@ bool QuadrotorSim::Config::validate(std::string* why) const {
   if (!(finitePositive(collision_radius_m) && collision_radius_m <= 10.0))
     err << "collision_radius_m must be in (0, 10]; ";
   if (!std::isfinite(ground_z_m)) err << "ground_z_m must be finite; ";
-  if (!finiteNonNegative(position_noise_m) || !finiteNonNegative(velocity_noise_mps))
+  if (!finiteNonNegative(position_noise_m) || !finiteNonNegative(velocity_noise_mps) ||
+      !finiteNonNegative(position_drift_m_per_sqrt_s))
     err << "odometry noise sigmas must be >= 0; ";
   if (!(finiteNonNegative(odom_delay_s) && odom_delay_s <= 10.0)) err << "odom_delay_s must be in [0, 10]; ";
   if (world_frame.empty() || body_frame.empty() || camera_frame.empty()) err << "frame names must not be empty; ";
@@ -124,6 +125,7 @@ bool readQuadrotorSimParams(const ros::NodeHandle& pnh, QuadrotorSim::Config* co
   r.read("ground_z_m", c.ground_z_m);
   r.read("odom_noise/position_m", c.position_noise_m);
   r.read("odom_noise/velocity_mps", c.velocity_noise_mps);
+  r.read("odom_noise/drift_m_per_sqrt_s", c.position_drift_m_per_sqrt_s);
   r.readUnsigned("odom_noise/seed", c.noise_seed);
   r.read("odom_delay_s", c.odom_delay_s);
   r.read("world_frame", c.world_frame);
@@ -184,6 +186,7 @@ std::unique_ptr<QuadrotorSim> QuadrotorSim::create(const ros::NodeHandle& nh, co
 
   s.odom_pub_ = s.nh_.advertise<nav_msgs::Odometry>("odom", 10);
   s.truth_pub_ = s.pnh_.advertise<nav_msgs::Odometry>("ground_truth", 10);
+  s.fc_odom_pub_ = s.pnh_.advertise<nav_msgs::Odometry>("fc_odom", 10);
   s.collision_pub_ = s.nh_.advertise<topo_planner::Collision>("quadrotor/collision", 10);
   if (config.publish_clock) s.clock_pub_ = s.nh_.advertise<rosgraph_msgs::Clock>("/clock", 10);
   s.depth_blackout_pub_ = s.pnh_.advertise<std_msgs::Bool>("depth_blackout", 1, /*latch=*/true);
@@ -499,6 +502,21 @@ ros::Time QuadrotorSim::publishOdometry() {
     truth_pub_.publish(msg);
   }
   Quadrotor::State measured = truth;
+  if (config_.position_drift_m_per_sqrt_s > 0.0) {
+    std::normal_distribution<double> n01(0.0, 1.0);
+    const double dt = 1.0 / config_.odom_rate_hz;
+    for (int a = 0; a < 3; ++a) drift_[a] += config_.position_drift_m_per_sqrt_s * std::sqrt(dt) * n01(noise_rng_);
+    measured.position += drift_;
+  }
+  if (fc_odom_pub_.getNumSubscribers() > 0) {
+    // The flight controller's estimate: the estimator's frame (its drift and jumps), at the IMU's
+    // latency and smoothness (no white noise, no delay).
+    Quadrotor::State fc = measured;
+    fc.position += odom_offset_;
+    nav_msgs::Odometry msg;
+    stateToOdometry(fc, stamp, config_.world_frame, config_.body_frame, &msg);
+    fc_odom_pub_.publish(msg);
+  }
   if (config_.position_noise_m > 0.0 || config_.velocity_noise_mps > 0.0) {
     std::normal_distribution<double> n01(0.0, 1.0);
     for (int a = 0; a < 3; ++a) measured.position[a] += config_.position_noise_m * n01(noise_rng_);

@@ -44,6 +44,7 @@
 #include <ros/callback_queue.h>
 #include <ros/ros.h>
 
+#include <deque>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -69,6 +70,10 @@ class DepthCameraServer {
     std::string world_frame = "world";            ///< frame of ~camera/pose
     std::string camera_frame = "camera_optical";  ///< frame of the image and camera_info
     double max_odom_age_s = 0.5;             ///< no frame from odometry older than this (ROS time) [s]
+    /// Render from the simulator's true pose at the odometry's stamp (quadrotor_sim/ground_truth) and
+    /// send the odometry's pose: the map then carries the estimate's noise and drift, as on a real
+    /// drone. false: render from the odometry (minus injected jumps).
+    bool render_from_truth = false;
     double truth_map_margin_m = 1.5;         ///< free margin of the true map's window [m]
     double truth_esdf_max_distance_m = 2.0;  ///< ESDF truncation of the true map: the longest sphere-tracing step [m]
     double status_period_s = 10.0;           ///< period of the status line (wall) [s]
@@ -84,6 +89,7 @@ class DepthCameraServer {
   DepthCameraServer(const ros::NodeHandle& nh, const Config& config);
   void odomCallback(const nav_msgs::OdometryConstPtr& msg);
   void blackoutCallback(const std_msgs::BoolConstPtr& msg);
+  void truthCallback(const nav_msgs::OdometryConstPtr& msg);
   void offsetCallback(const geometry_msgs::Vector3StampedConstPtr& msg);
   void renderCallback(const ros::TimerEvent&);
 
@@ -94,6 +100,7 @@ class DepthCameraServer {
   nav_msgs::OdometryConstPtr latest_odom_;
   bool blackout_ = false;                                   // depth blackout fault
   Eigen::Vector3d odom_offset_ = Eigen::Vector3d::Zero();   // odometry jump fault [m]
+  std::deque<nav_msgs::OdometryConstPtr> truth_poses_;       // the last 2 s of true poses (render_from_truth)
   uint64_t blackout_frames_ = 0;                            // frames not sent for a blackout (render thread)
 
   // Render thread only.
@@ -110,7 +117,7 @@ class DepthCameraServer {
   ros::CallbackQueue render_queue_;
   std::unique_ptr<ros::AsyncSpinner> render_spinner_;
   std::unique_ptr<TruthMapSubscriber> truth_;
-  ros::Subscriber odom_sub_, blackout_sub_, offset_sub_;
+  ros::Subscriber odom_sub_, blackout_sub_, offset_sub_, truth_sub_;
   ros::Timer render_timer_;
   ros::Publisher image_pub_, info_pub_, pose_pub_;
 };

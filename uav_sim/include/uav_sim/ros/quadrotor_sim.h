@@ -14,6 +14,8 @@
 //                          static body_frame -> camera_frame (camera_extrinsic)
 //     quadrotor/collision  topo_planner/Collision  on each new contact
 //     ~ground_truth        nav_msgs/Odometry   the true state (no noise, no delay), when subscribed
+//     ~fc_odom             nav_msgs/Odometry   the flight controller's estimate: the odometry's drift and
+//                                              jumps, no white noise, no delay (when subscribed)
 //     /clock               rosgraph_msgs/Clock every step, when publish_clock
 //     ~depth_blackout      std_msgs/Bool (latched) true inside a depth blackout window: the depth
 //                          camera (uav_sim/ros/depth_camera_server.h) publishes no image meanwhile
@@ -134,6 +136,9 @@ class QuadrotorSim {
     double ground_z_m = 0.0;              ///< height of the ground plane [m]
     double position_noise_m = 0.0;        ///< odometry position noise sigma per axis [m]
     double velocity_noise_mps = 0.0;      ///< odometry velocity noise sigma per axis [m/s]
+    /// Odometry position drift: a random walk of this sigma per axis per square-root second (a VIO's
+    /// slow error; the depth camera, rendering from the true pose, then maps with it) [m/sqrt(s)].
+    double position_drift_m_per_sqrt_s = 0.0;
     uint32_t noise_seed = 1;              ///< odometry noise seed
     double odom_delay_s = 0.0;            ///< odometry published this long after its stamp (rounded to steps) [s]
     std::string world_frame = "world";            ///< frame of odometry, tf and collisions
@@ -205,6 +210,7 @@ class QuadrotorSim {
   bool in_failsafe_ = false;
   TrackingReference failsafe_reference_;
   std::mt19937 noise_rng_;
+  Eigen::Vector3d drift_ = Eigen::Vector3d::Zero();  // the odometry's position drift so far [m]
   struct Pending {
     uint64_t release_step;
     nav_msgs::Odometry msg;
@@ -232,7 +238,7 @@ class QuadrotorSim {
   ros::CallbackQueue command_queue_;
   std::unique_ptr<ros::AsyncSpinner> command_spinner_;
   ros::Subscriber command_sub_;
-  ros::Publisher odom_pub_, truth_pub_, collision_pub_, clock_pub_;
+  ros::Publisher odom_pub_, truth_pub_, fc_odom_pub_, collision_pub_, clock_pub_;
   ros::Publisher depth_blackout_pub_, odom_offset_pub_, fault_event_pub_;
   tf2_ros::TransformBroadcaster tf_broadcaster_;
   tf2_ros::StaticTransformBroadcaster static_broadcaster_;
