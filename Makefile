@@ -6,7 +6,7 @@ WS := $(ROOT)/build/ws
 CATKIN_ARGS := -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=Release
 BIN = $(1)/devel/lib/topo_planner
 
-.PHONY: deps build test bench bench-env bench-topo bench-opt bench-replan bench-forest-gen bench-camera bench-flight bench-faults demo map-demo test-asan test-tsan clean
+.PHONY: deps build test bench bench-env bench-topo bench-opt bench-replan bench-forest-gen bench-camera bench-flight bench-flight-forests bench-faults demo map-demo test-asan test-tsan clean
 
 deps:
 	@bash scripts/install_deps.sh
@@ -70,11 +70,18 @@ map-demo: build
 	@mkdir -p results
 	$(call BIN,$(WS))/map_demo --map $(ROOT)/test/data/forest0.bt --out $(ROOT)/results
 
-# 20 closed-loop flights (seeds 1..10 at medium and high density, 3 m/s, 3 goals each), one after
-# the other, headless: results/bench_flight.md and a RESULT line. About half an hour; not in CI.
+# 36 closed-loop flights over kinds of world and sensing (scripts/bench_flight.py --suite worlds: six
+# world styles x ideal and realistic sensing x seeds 1..3, 3 m/s, 3 goals each in the open or beside
+# obstacles), one after the other, headless: results/bench_flight.md and a RESULT line. About an hour;
+# not in CI. bench-flight-forests: the earlier 20 forest flights (seeds 1..10 at medium and high
+# density, goals in the open), results in results/forests/.
 bench-flight: build
 	@mkdir -p results
 	WS=$(WS) /usr/bin/python3 scripts/bench_flight.py --out $(ROOT)/results $(BENCH_ARGS)
+
+bench-flight-forests: build
+	@mkdir -p results/forests
+	WS=$(WS) /usr/bin/python3 scripts/bench_flight.py --suite forests --out $(ROOT)/results/forests $(BENCH_ARGS)
 
 # Fault injection (scripts/bench_faults.py): 20 seeded closed-loop flights in simulated time, each with
 # a random schedule of faults (camera or odometry blackout, odometry jump, ROS time step, planner kill),
