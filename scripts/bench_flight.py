@@ -113,9 +113,22 @@ def run_world_flight(args, style, density, sensing, seed, out_dir):
                 'report': None, 'replan_ms': [], 'goals_total': args.goals, 'kinds': [], 'log': bt}
     goals = lines['GOALS'].split()
     kinds = lines.get('KINDS', '').split()
+    report_path = os.path.join(out_dir, name + '_report.json')
+    if args.resume and os.path.exists(report_path):  # flown by an earlier run: its files are reused
+        with open(report_path) as fh:
+            report = json.load(fh)
+        events_path = os.path.join(out_dir, name + '_events.csv')
+        ms = []
+        if os.path.exists(events_path):
+            with open(events_path, newline='') as fh:
+                ms = [m for m in (num(r['total_ms']) for r in csv.DictReader(fh)) if not math.isnan(m)]
+        return {'name': name, 'style': style, 'sensing': sensing, 'seed': seed, 'rc': 0, 'wall_s': 0.0, 'report': report,
+                'replan_ms': ms, 'goals_total': report['goals_total'], 'kinds': kinds,
+                'log': os.path.join(out_dir, name + '.log')}
     extra = ['--', f'map_file:={bt}', f'sensing:={sensing}', 'map_origin:=[-20.0, -10.0, 0.3]',
              'map_size:=[40.0, 20.0, 3.4]']
-    f = run_flight(args, density, seed, out_dir, name=name, goals=goals, extra=extra, style=style)
+    # The map comes from the file: the generator's style does not apply (and 'boxes' is not one of its).
+    f = run_flight(args, density, seed, out_dir, name=name, goals=goals, extra=extra)
     f.update({'style': style, 'sensing': sensing, 'kinds': kinds})
     return f
 
@@ -278,6 +291,8 @@ def main(argv):
     ap.add_argument('--styles', default='forest-medium,forest-high,windows,rings,boxes,mixed',
                     help='worlds suite: style[-density] list (density medium unless given)')
     ap.add_argument('--sensing', default='ideal,realistic', help='worlds suite: sensing profiles')
+    ap.add_argument('--resume', action='store_true',
+                    help='worlds suite: reuse the reports of flights already in OUT (an interrupted run)')
     args = ap.parse_args(argv[1:])
     args.ws = os.environ.get('WS', os.path.join(ROOT, 'build', 'ws'))
     if args.default_goals:

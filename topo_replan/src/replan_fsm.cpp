@@ -779,6 +779,25 @@ std::optional<ExecTrajectory> ReplanFsm::backoffTrajectoryLocked(double t, const
     *report = "no back-off: no flown path to go back along";
     return std::nullopt;
   }
+  // The flown path zig-zags where the vehicle hovered and re-planned: shortcut it where the straight
+  // way keeps the clearance the vehicle had (or the safety clearance), so the manoeuvre has no corners.
+  const double keep = std::min(d0, config_.safety_clearance_m);
+  auto straightIsClear = [&](const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+    const int n = std::max(1, int(std::ceil((b - a).norm() / 0.05)));
+    for (int k = 0; k <= n; ++k) {
+      double d = 0.0;
+      if (!map.interpolate(a + (b - a) * (double(k) / n), &d, nullptr) || d < keep) return false;
+    }
+    return true;
+  };
+  std::vector<Eigen::Vector3d> smooth{walk.front()};
+  for (size_t i = 0; i + 1 < walk.size();) {
+    size_t j = walk.size() - 1;
+    while (j > i + 1 && !straightIsClear(walk[i], walk[j])) --j;
+    smooth.push_back(walk[j]);
+    i = j;
+  }
+  walk = std::move(smooth);
   std::optional<ExecTrajectory> backoff = restToRestLocked(walk, t, map, d0, config_.backoff_speed_mps, "back-off", report);
   if (!backoff || !report->empty()) return backoff;
   char text[160];
@@ -796,25 +815,32 @@ std::optional<ExecTrajectory> ReplanFsm::restToRestLocked(const std::vector<Eige
   std::vector<double> arc{0.0};
   for (size_t i = 1; i < walk.size(); ++i) arc.push_back(arc.back() + (walk[i] - walk[i - 1]).norm());
   const double length = arc.back();
-  // Rest to rest along the walk with a smoothstep s(u) = L (3u^2 - 2u^3), whose peak speed is 1.5 L / T.
-  const double T = std::max(0.5, 1.5 * length / speed_mps);
-  const int n = std::max(6, int(std::ceil(T / 0.05)));
-  std::vector<Eigen::Vector3d> points;
-  size_t seg = 1;
-  for (int k = 0; k <= n; ++k) {
-    const double u = double(k) / n, s = length * u * u * (3.0 - 2.0 * u);
-    while (seg + 1 < walk.size() && arc[seg] < s) ++seg;
-    const double span = arc[seg] - arc[seg - 1];
-    const double f = span > 0.0 ? std::clamp((s - arc[seg - 1]) / span, 0.0, 1.0) : 1.0;
-    points.push_back(walk[seg - 1] + f * (walk[seg] - walk[seg - 1]));
-  }
+  // Rest to rest along the walk with a smoothstep s(u) = L (3u^2 - 2u^3), whose peak speed is 1.5 L / T;
+  // slowed down until the fitted curve's acceleration bound is within half the braking deceleration
+  // (corners of the walk), so the vehicle tracks it closely.
   ExecTrajectory escape;
   escape.start_time_s = t;
   escape.escape = true;
   const Eigen::Vector3d zero = Eigen::Vector3d::Zero();
-  if (!UniformBspline::fitToPoints(points, T / n, zero, zero, zero, zero, 3, &escape.spline)) {
-    *report = std::string("no ") + what + ": the walk could not be fitted";
-    return std::nullopt;
+  double T = std::max(0.5, 1.5 * length / speed_mps);
+  for (int attempt = 0;; ++attempt) {
+    const int n = std::max(6, int(std::ceil(T / 0.05)));
+    std::vector<Eigen::Vector3d> points;
+    size_t seg = 1;
+    for (int k = 0; k <= n; ++k) {
+      const double u = double(k) / n, s = length * u * u * (3.0 - 2.0 * u);
+      while (seg + 1 < walk.size() && arc[seg] < s) ++seg;
+      const double span = arc[seg] - arc[seg - 1];
+      const double f = span > 0.0 ? std::clamp((s - arc[seg - 1]) / span, 0.0, 1.0) : 1.0;
+      points.push_back(walk[seg - 1] + f * (walk[seg] - walk[seg - 1]));
+    }
+    if (!UniformBspline::fitToPoints(points, T / n, zero, zero, zero, zero, 3, &escape.spline)) {
+      *report = std::string("no ") + what + ": the walk could not be fitted";
+      return std::nullopt;
+    }
+    const double acc = escape.spline.maxAcceleration(), limit = 0.5 * config_.brake_acc_mps2;
+    if (acc <= limit || attempt >= 6) break;
+    T *= std::min(2.0, std::sqrt(acc / limit) * 1.05);
   }
   // Checked along the curve: never closer than it starts (nor than the safety clearance, when it
   // starts farther), never out of the map, in known space (beyond the vehicle's own radius).
@@ -1089,9 +1115,10 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
     // A plan cut to a hold where the vehicle is (unknown space right ahead), again and again at the
     // same place: turning to look has not shown the way (it may lie above or below the camera's
     // view). Back off along the flown path, where the camera sees more, and re-route from there.
-    const bool look_hold = traj.stops_before_unknown && request.start.velocity.norm() < 0.05 &&
-                           (traj.spline.evaluate(traj.spline.duration()) - traj.spline.evaluate(0.0)).norm() < 0.05;
-    const bool same_place = look_holds_ > 0 && (request.start.position - look_hold_position_).norm() < 0.2;
+    // (A hold, or a stop a few centimetres on: the cut plans of a vehicle that hovers at the edge.)
+    const bool look_hold = traj.stops_before_unknown && request.start.velocity.norm() < config_.stopped_speed_mps &&
+                           (traj.spline.evaluate(traj.spline.duration()) - traj.spline.evaluate(0.0)).norm() < 0.3;
+    const bool same_place = look_holds_ > 0 && (request.start.position - look_hold_position_).norm() < 0.3;
     look_holds_ = look_hold ? (same_place ? look_holds_ + 1 : 1) : 0;
     if (look_hold && !same_place) look_hold_position_ = request.start.position;
     std::optional<ExecTrajectory> backoff;
