@@ -816,15 +816,16 @@ std::optional<ExecTrajectory> ReplanFsm::restToRestLocked(const std::vector<Eige
   for (size_t i = 1; i < walk.size(); ++i) arc.push_back(arc.back() + (walk[i] - walk[i - 1]).norm());
   const double length = arc.back();
   // Rest to rest along the walk with a smoothstep s(u) = L (3u^2 - 2u^3), whose peak speed is 1.5 L / T;
-  // slowed down until the fitted curve's acceleration bound is within half the braking deceleration
-  // (corners of the walk), so the vehicle tracks it closely.
+  // slowed down (at most 2 x 1.5 times: the bound is conservative, and a stretched walk must stay a
+  // manoeuvre of seconds, cheap to fit) while the fitted curve's acceleration bound exceeds half the
+  // braking deceleration (corners of the walk), so the vehicle tracks it closely. At most 200 points.
   ExecTrajectory escape;
   escape.start_time_s = t;
   escape.escape = true;
   const Eigen::Vector3d zero = Eigen::Vector3d::Zero();
   double T = std::max(0.5, 1.5 * length / speed_mps);
   for (int attempt = 0;; ++attempt) {
-    const int n = std::max(6, int(std::ceil(T / 0.05)));
+    const int n = std::clamp(int(std::ceil(T / 0.05)), 6, 200);
     std::vector<Eigen::Vector3d> points;
     size_t seg = 1;
     for (int k = 0; k <= n; ++k) {
@@ -839,8 +840,8 @@ std::optional<ExecTrajectory> ReplanFsm::restToRestLocked(const std::vector<Eige
       return std::nullopt;
     }
     const double acc = escape.spline.maxAcceleration(), limit = 0.5 * config_.brake_acc_mps2;
-    if (acc <= limit || attempt >= 6) break;
-    T *= std::min(2.0, std::sqrt(acc / limit) * 1.05);
+    if (acc <= limit || attempt >= 2) break;
+    T *= std::min(1.5, std::sqrt(acc / limit) * 1.05);
   }
   // Checked along the curve: never closer than it starts (nor than the safety clearance, when it
   // starts farther), never out of the map, in known space (beyond the vehicle's own radius).

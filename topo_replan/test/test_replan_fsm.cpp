@@ -395,8 +395,11 @@ TEST(ReplanFsm, BacksOffOutOfADeadEndAndReroutes) {
     // Every back-off leaves the slot: it ends where the search can start (not back in the slot, as
     // one walking back along the previous back-off would).
     for (const ExecTrajectory& tr : log.trajectories)
-      if (tr.escape && tr.spline.duration() > 0.5)
+      if (tr.escape && tr.spline.duration() > 0.5) {
         EXPECT_GE(after.query(tr.spline.evaluate(tr.spline.duration())).distance, config.escape_min_clearance_m);
+        // Seconds, not a minute: at most 2.25 x (1.5 x 3 m / 1 m/s) (a bench flight's back-off once took 54 s).
+        EXPECT_LE(tr.spline.duration(), 2.25 * 1.5 * config.max_backoff_length_m / config.backoff_speed_mps + 0.1);
+      }
     std::printf("dead end: goal reached in %.1f s after %d back-off(s), %zu planning calls\n", log.duration_s, backoffs,
                 log.events.size());
   }
