@@ -10,7 +10,7 @@ simulator.launch sensing:=) and seeds 1..N: path_searching's flight_world writes
 OctoMap and draws three goals, each either in the open (at the two ends, x = +-15) or beside
 obstacles (0.5-0.8 m from the nearest one, inside the area), verified reachable with the global
 route on the true map. The planner's window is the area's width in y (the walls close it). Files go
-to OUT/bench_flight/<style>_<sensing>_s<seed>*. Ends with
+to OUT/bench_flight/<style>-<density>_<sensing>_s<seed>*. Ends with
   RESULT flights=... goals_reached_rate=... collisions=... failed_replan_rate=... mean_speed_mps=...
          rate_<style>=... rate_<sensing>=... near_goals_rate=...
 
@@ -101,7 +101,7 @@ def run_flight(args, density, seed, out_dir, name=None, goals=None, extra=(), st
 
 def run_world_flight(args, style, density, sensing, seed, out_dir):
     """One flight of the worlds suite: flight_world makes the map and the goals, run_flight flies them."""
-    name = f'{style}_{sensing}_s{seed}'
+    name = f'{style}-{density}_{sensing}_s{seed}'  # the density too: forest-medium and forest-high differ only there
     bt = os.path.join(out_dir, name + '.bt')
     tool = os.path.join(args.ws, 'devel', 'lib', 'topo_planner', 'flight_world')
     world = subprocess.run([tool, '--style', style, '--density', density, '--seed', str(seed), '--goals', str(args.goals),
