@@ -200,7 +200,20 @@ def flight_table(flights):
     return lines
 
 
-def fmt_failed(a):
+def write_report(args, md, summary, result):
+    """OUT/bench_flight.md (the tables and the RESULT line), and the summary and RESULT on stdout."""
+    md = md + ['', '```', result, '```', '']
+    md_path = os.path.join(args.out, 'bench_flight.md')
+    with open(md_path, 'w') as f:
+        f.write('\n'.join(md))
+    print()
+    print('\n'.join(summary))
+    print(f'bench_flight: wrote {md_path}')
+    print(result)
+    return 0
+
+
+def failed_rate(a):
     return a['replan_failures'] / a['replans'] if a['replans'] else 0.0
 
 
@@ -216,8 +229,7 @@ def worlds_suite(args):
           f'max_vel {args.max_vel} m/s, {args.goals} goals each; files in {out_dir}', flush=True)
     flights = []
     for st, de, se, seed in cases:
-        style = st if st != 'forest' else f'forest'
-        f = run_world_flight(args, style, de, se, seed, out_dir)
+        f = run_world_flight(args, st, de, se, seed, out_dir)
         f['group'] = f'{st}-{de}' if st == 'forest' else st
         flights.append(f)
         r = f['report']
@@ -246,7 +258,7 @@ def worlds_suite(args):
         for label, a in rows:
             lines.append(f"| {label} | {a['flights']} | {a['goals_reached']}/{a['goals_total']} | {fmt(a['goals_reached_rate'], 3)} | "
                          f"{a['near_reached']}/{a['near_goals']} | {a['collisions']} | {a['replan_failures']}/{a['replans']} "
-                         f"({100 * fmt_failed(a):.1f}%) | {fmt(a['min_clearance_m'])} | {fmt(a['mean_speed_mps'])} | "
+                         f"({100 * failed_rate(a):.1f}%) | {fmt(a['min_clearance_m'])} | {fmt(a['mean_speed_mps'])} | "
                          f"{fmt(a['replan_ms_median'], 1)} / {fmt(a['replan_ms_p95'], 1)} |")
         return lines
     md = ['# Closed-loop flight benchmark: kinds of world and sensing', '',
@@ -262,18 +274,10 @@ def worlds_suite(args):
     rates += ' ' + ' '.join(f"rate_{se}={a['goals_reached_rate']:.3f}" for se, a in per_sensing)
     near = overall['near_reached'] / overall['near_goals'] if overall['near_goals'] else 0.0
     result = (f"RESULT flights={overall['flights']} goals_reached_rate={overall['goals_reached_rate']:.3f} "
-              f"collisions={overall['collisions']} failed_replan_rate={fmt_failed(overall):.3f} "
+              f"collisions={overall['collisions']} failed_replan_rate={failed_rate(overall):.3f} "
               f"mean_speed_mps={fmt(overall['mean_speed_mps'], 2)} near_goals_rate={near:.3f} {rates} "
               f"replan_ms_median={overall['replan_ms_median']:.2f} replan_ms_p95={overall['replan_ms_p95']:.2f}")
-    md += ['', '```', result, '```', '']
-    md_path = os.path.join(args.out, 'bench_flight.md')
-    with open(md_path, 'w') as f:
-        f.write('\n'.join(md))
-    print()
-    print('\n'.join(table(per_style + per_sensing + [('overall', overall)])))
-    print(f'bench_flight: wrote {md_path}')
-    print(result)
-    return 0
+    return write_report(args, md, table(per_style + per_sensing + [('overall', overall)]), result)
 
 
 def main(argv):
@@ -339,15 +343,7 @@ def main(argv):
               f"collisions={overall['collisions']} min_clearance_m={fmt(overall['min_clearance_m'], 3)} "
               f"mean_speed_mps={fmt(overall['mean_speed_mps'], 2)} replan_ms_median={overall['replan_ms_median']:.2f} "
               f"replan_ms_p95={overall['replan_ms_p95']:.2f}")
-    md += ['', '```', result, '```', '']
-    md_path = os.path.join(args.out, 'bench_flight.md')
-    with open(md_path, 'w') as f:
-        f.write('\n'.join(md))
-    print()
-    print('\n'.join(summary_table(groups)))
-    print(f'bench_flight: wrote {md_path}')
-    print(result)
-    return 0
+    return write_report(args, md, summary_table(groups), result)
 
 
 if __name__ == '__main__':

@@ -621,11 +621,10 @@ ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::s
   return brake;
 }
 
-bool ReplanFsm::committable(const EsdfMap& map, const Eigen::Vector3d& p, const Eigen::Vector3d& start) const {
+bool ReplanFsm::committable(const EsdfMap& map, const Eigen::Vector3d& p) const {
   // Only around a hover the planner did not fly to (a mission's start, a re-anchoring): around any
   // plan's start, each plan would commit known_start_radius_m further into unobserved space (a
   // creep at a metre per second into space the camera cannot see, e.g. above or below it).
-  (void)start;
   if (known_anchor_ && (p - *known_anchor_).norm() <= config_.known_start_radius_m) return true;
   const DistanceQuery q = map.query(p);
   return q.status == QueryStatus::kOk && q.distance >= config_.safety_clearance_m;
@@ -649,7 +648,7 @@ bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const 
     const Eigen::Vector3d p = plan.evaluate(tau);
     const double s = arc.empty() ? 0.0 : arc.back() + (p - prev).norm();
     prev = p;
-    if (!committable(map, p, start)) {
+    if (!committable(map, p)) {
       blocked_s = s;
       break;
     }
@@ -706,7 +705,7 @@ bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const 
   // The cut trajectory is checked as it will be flown.
   const double D = traj->spline.duration();
   for (double tau = 0.0;; tau = std::min(D, tau + dt)) {
-    if (!committable(map, traj->spline.evaluate(tau), start)) {
+    if (!committable(map, traj->spline.evaluate(tau))) {
       *why = "known-space commitment: the cut trajectory leaves the known free space " + std::to_string(tau) +
              " s after its start";
       return false;

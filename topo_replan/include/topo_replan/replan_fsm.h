@@ -340,8 +340,9 @@ class ReplanFsm {
   ExecTrajectory brakingTrajectory(double t, const EsdfMap& map, std::string* report,
                                    const FlatState* from = nullptr) const;
   /// A point of `map` the committed part of a trajectory may cross: observed free (all 8 voxels
-  /// around it), at least safety_clearance_m from obstacles; or within known_start_radius_m of start.
-  bool committable(const EsdfMap& map, const Eigen::Vector3d& p, const Eigen::Vector3d& start) const;
+  /// around it), at least safety_clearance_m from obstacles; or within known_start_radius_m of the
+  /// known anchor (known_anchor_).
+  bool committable(const EsdfMap& map, const Eigen::Vector3d& p) const;
   /// The known-space commitment of a plan starting at t0 (see the class comment): fills traj->spline,
   /// brake_start_s, stops_before_unknown and the heading target; false (with why) when the cut
   /// trajectory cannot be built or fails its check.
