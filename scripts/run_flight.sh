@@ -4,7 +4,7 @@
 # over), then plots the flight and prints the report. Exits 0 only if the report says success (every
 # goal reached, no collision).
 #
-#   run_flight.sh [--density low|medium|high] [--map-style forest|walls|rings|mixed|windows] [--seed N] [--goals "x y z x y z ..."] [--start "x y z"]
+#   run_flight.sh [--density low|medium|high] [--map-style forest|walls|rings|windows|boxes|mixed] [--seed N] [--goals "x y z x y z ..."] [--start "x y z"]
 #                 [--max-vel M/S] [--goal-timeout S] [--output-dir DIR] [--name NAME] [--rviz true|false]
 #                 [--sim-time true|false] [--realtime-factor F] [--master-port PORT] [--timeout S] [--verbose]
 #                 [--no-plot] [-- roslaunch args...]

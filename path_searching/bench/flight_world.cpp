@@ -63,14 +63,9 @@ int main(int argc, char** argv) {
   else if (density == "high") d = ObstacleDensity::kHigh;
   else return usage("density must be low, medium or high");
 
-  // The map generator's styles (config/map_generator.yaml), plus boxes: floating 3-D boxes.
+  // The map generator's styles (ForestConfig::applyStyle, as the simulator's map_generator_node).
   ForestConfig f = ForestConfig::preset(d);
-  if (style == "walls") f.walls_per_m2 = 0.02;
-  else if (style == "rings") f.rings_per_m2 = 0.02;
-  else if (style == "windows") f.window_walls = 2;
-  else if (style == "mixed") f.walls_per_m2 = f.rings_per_m2 = 0.01, f.window_walls = 1;
-  else if (style == "boxes") f.pillars_per_m2 *= 0.5, f.floating_per_m2 = 0.12;
-  else if (style != "forest") return usage("unknown style");
+  if (!f.applyStyle(style)) return usage("unknown style");
   // The simulator's forest area and scenario (launch/simulation.launch, config/map_generator.yaml).
   const Eigen::Vector3d area_min(-12.0, -10.0, 0.0), area_max(12.0, 10.0, 3.0);
   f.keep_free = {start};

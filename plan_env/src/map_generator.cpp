@@ -63,6 +63,25 @@ ForestConfig ForestConfig::preset(ObstacleDensity density) {
   return c;
 }
 
+bool ForestConfig::applyStyle(const std::string& style) {
+  if (style == "walls") {
+    walls_per_m2 = 0.02;
+  } else if (style == "rings") {
+    rings_per_m2 = 0.02;
+  } else if (style == "windows") {
+    window_walls = 2;
+  } else if (style == "boxes") {
+    pillars_per_m2 *= 0.5;
+    floating_per_m2 = 0.12;
+  } else if (style == "mixed") {
+    walls_per_m2 = rings_per_m2 = 0.01;
+    window_walls = 1;
+  } else if (style != "forest") {
+    return false;
+  }
+  return true;
+}
+
 bool ForestConfig::validate(std::string* why) const {
   std::ostringstream err;
   auto density_ok = [](double d) { return std::isfinite(d) && d >= 0.0 && d <= 100.0; };

@@ -208,6 +208,30 @@ TEST(MapGenerator, WindowWallsCloseTheWindowExceptTheirOpenings) {
   EXPECT_FALSE(plain.validate(&why));
 }
 
+// The styles the simulator and the flight benchmark share.
+TEST(MapGenerator, StylesAddTheirObstaclesToTheDensitys) {
+  const ForestConfig medium = ForestConfig::preset(ObstacleDensity::kMedium);
+  ForestConfig f = medium;
+  EXPECT_TRUE(f.applyStyle("forest"));
+  EXPECT_EQ(f.walls_per_m2 + f.rings_per_m2 + f.window_walls, 0.0);
+  f = medium;
+  EXPECT_TRUE(f.applyStyle("windows"));
+  EXPECT_EQ(f.window_walls, 2);
+  EXPECT_EQ(f.pillars_per_m2, medium.pillars_per_m2);
+  f = medium;
+  EXPECT_TRUE(f.applyStyle("boxes"));
+  EXPECT_EQ(f.pillars_per_m2, 0.5 * medium.pillars_per_m2);
+  EXPECT_GT(f.floating_per_m2, medium.floating_per_m2);
+  f = medium;
+  EXPECT_TRUE(f.applyStyle("mixed"));
+  EXPECT_GT(f.walls_per_m2, 0.0);
+  EXPECT_GT(f.rings_per_m2, 0.0);
+  EXPECT_EQ(f.window_walls, 1);
+  f = medium;
+  EXPECT_FALSE(f.applyStyle("cave"));
+  EXPECT_TRUE(f.validate(nullptr));
+}
+
 TEST(MapGenerator, ValidateRefusesBadConfigs) {
   std::string why;
   EXPECT_TRUE(ForestConfig().validate(&why)) << why;

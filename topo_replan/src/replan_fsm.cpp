@@ -426,7 +426,7 @@ void ReplanFsm::observeClockLocked(double now, FsmOutput* out) {
   shiftOld(&depth_arrival_s_);
   if (server_) shiftOld(&server_->stamp_s);
   shiftOld(&server_anchor_s_);
-  mission_start_s_ += shift;  // read from this clock
+  last_progress_s_ += shift;  // read from this clock
   last_clock_s_ = now;
   ++time_jumps_;
   time_jumped_ = true;
@@ -472,7 +472,6 @@ GoalStatus ReplanFsm::setGoals(const std::vector<Eigen::Vector3d>& goals) {
   rerouting_ = false;
   rerouted_since_success_ = false;
   route_stale_ = true;
-  ++goals_epoch_;
   ++route_epoch_;
   return GoalStatus::kAccepted;
 }
@@ -903,7 +902,8 @@ void ReplanFsm::giveUpLocked(double t, const EsdfMap& map, GoalStatus status, Re
   setState(FsmState::kWaitTarget, out, reason);
 }
 
-bool ReplanFsm::routeLocked(double t, const EsdfMap& map, std::unique_lock<std::mutex>* lock, FsmOutput* out) {
+void ReplanFsm::routeLocked(double t, const EsdfMap& map, std::unique_lock<std::mutex>* lock, FsmOutput* out,
+                            const std::function<double()>& now, double* searched_until) {
   // Does this tick start (or rebuild) a reference, and through which goals?
   const bool at_rest = (!current_ || t >= current_->endTime()) && odom_velocity_.norm() < config_.stopped_speed_mps;
   bool starts = false;
@@ -915,11 +915,11 @@ bool ReplanFsm::routeLocked(double t, const EsdfMap& map, std::unique_lock<std::
     case FsmState::kGenNewTraj: starts = true; break;
     case FsmState::kEmergencyStop: starts = at_rest && (goals_pending_ || !goals_.empty()); break;
   }
-  if (!starts) return false;
+  if (!starts) return;
   const std::vector<Eigen::Vector3d> goals = goals_pending_ ? pending_goals_ : remainingGoalsLocked();
-  if (goals.empty() || (!route_stale_ && goals == route_goals_)) return false;
+  if (goals.empty() || (!route_stale_ && goals == route_goals_)) return;
   for (const Eigen::Vector3d& g : goals)
-    if (!g.allFinite()) return false;  // refused by startGoalsLocked
+    if (!g.allFinite()) return;  // refused by startGoalsLocked
   const Eigen::Vector3d start = takeoverStateLocked(t + takeover_delay_s_).position;
   const uint64_t epoch = route_epoch_;
   const bool rerouting = rerouting_;
@@ -945,11 +945,12 @@ bool ReplanFsm::routeLocked(double t, const EsdfMap& map, std::unique_lock<std::
     failed_leg = i;
     if (status == SearchStatus::kSuccess) route.insert(route.end(), leg.path.begin() + 1, leg.path.end());
   }
+  *searched_until = now ? now() : t;  // the clock, read without the mutex
   lock->lock();
 
   if (route_epoch_ != epoch) {
     // New goals, a stop or an odometry jump meanwhile: the search answered another question.
-    return true;
+    return;
   }
   route_stale_ = false;
   route_goals_ = goals;
@@ -976,10 +977,10 @@ bool ReplanFsm::routeLocked(double t, const EsdfMap& map, std::unique_lock<std::
       new_mission_ = false;
       last_goal_status_ = GoalStatus::kUnreachable;
       out->message += std::string("goal refused: ") + toString(GoalStatus::kUnreachable) + ": " + text;
-      return true;
+      return;
     }
     giveUpLocked(t, map, GoalStatus::kUnreachable, ReplanStatus::kNoPath, text, out);
-    return true;
+    return;
   } else {
     // No proof either way (budget, start or goal inside the route's end clearance, or unknown space
     // not free to the route): straight references.
@@ -990,13 +991,12 @@ bool ReplanFsm::routeLocked(double t, const EsdfMap& map, std::unique_lock<std::
   }
   if (!out->message.empty()) out->message += "; ";
   out->message += text;
-  return true;
 }
 
 bool ReplanFsm::startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out) {
   goals_pending_ = false;
   const std::vector<Eigen::Vector3d> goals = pending_goals_;
-  rerouting_ = false;
+  const bool rerouted = std::exchange(rerouting_, false);
   auto refuse = [&](GoalStatus status, const std::string& why) {
     last_goal_status_ = status;
     new_mission_ = false;
@@ -1038,7 +1038,7 @@ bool ReplanFsm::startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out) {
   next_goal_ = 0;
   if (new_mission_) {
     new_mission_ = false;
-    mission_start_s_ = t;
+    last_progress_s_ = t;
     mission_limit_s_ = config_.mission_timeout_s > 0.0 ? config_.mission_timeout_s : std::max(60.0, 4.0 * ref.duration());
     backoffs_ = 0;
   }
@@ -1046,7 +1046,7 @@ bool ReplanFsm::startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out) {
   last_goal_status_ = GoalStatus::kAccepted;
   out->new_reference = true;
   setState(FsmState::kGenNewTraj, out,
-           std::string(rerouting_ ? "re-routed" : "new") + " reference, " + std::to_string(goals.size()) + " goal(s)" +
+           std::string(rerouted ? "re-routed" : "new") + " reference, " + std::to_string(goals.size()) + " goal(s)" +
                (routed ? ", along the global route" : ""));
   return true;
 }
@@ -1067,7 +1067,6 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
   event.state = state_;
   event.position = request.start.position;
   if (!generating) setState(FsmState::kReplanTraj, out, toString(trigger));
-  const uint64_t goals_epoch = goals_epoch_;
 
   lock->unlock();
   ReplanResult result = replanner_->replan(map, request);
@@ -1130,7 +1129,7 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
     // Holding there is no progress: it does not restart the mission's time limit, and ends the
     // mission when that passes.
     if (look_hold && !backoff && config_.global_route &&
-        t - std::max(mission_start_s_, last_success_s_) > mission_limit_s_) {
+        t - last_progress_s_ > mission_limit_s_) {
       char text[160];
       std::snprintf(text, sizeof(text), "held at the edge of the known space, no way on for the mission's time limit of %.0f s",
                     mission_limit_s_);
@@ -1167,7 +1166,8 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
     collision_ahead_ = false;
     consecutive_failures_ = 0;
     rerouted_since_success_ = false;
-    if (!look_hold) last_success_s_ = t;
+    failures_at_reroute_ = 0;
+    if (!look_hold) last_progress_s_ = t;
     event.published = true;
     out->trajectory = traj;
     setState(FsmState::kExecTraj, out, "");
@@ -1185,7 +1185,7 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
       if (!config_.global_route && consecutive_failures_ >= config_.max_plan_failures) {
         event.fallback = "give_up";
         give_up_why = "no trajectory after " + std::to_string(consecutive_failures_) + " tries";
-      } else if (config_.global_route && t - std::max(mission_start_s_, last_success_s_) > mission_limit_s_) {
+      } else if (config_.global_route && t - last_progress_s_ > mission_limit_s_) {
         event.fallback = "give_up";
         std::snprintf(text, sizeof(text), "no trajectory for the mission's time limit of %.0f s (%d tries in a row failed)",
                       mission_limit_s_, consecutive_failures_);
@@ -1230,7 +1230,7 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
       route_stale_ = true;
       rerouted_since_success_ = true;
       failures_at_reroute_ = consecutive_failures_;
-      if (!generating && goals_epoch_ == goals_epoch && !goals_pending_) {
+      if (!generating && !goals_pending_) {
         // A moving vehicle: a new reference from the takeover state, next tick (unless new goals
         // arrived while planning: they are flown instead).
         pending_goals_ = remainingGoalsLocked();
@@ -1305,10 +1305,11 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
   }
   if (config_.global_route) {
     const FsmState before = state_;
-    const bool searched = routeLocked(t, map, &lock, &out);
+    double searched_until = NAN;
+    routeLocked(t, map, &lock, &out, now, &searched_until);
     if (out.event || state_ != before) return out;  // given up, or a braking took over meanwhile
     // A long search: plan at the next tick, from then (a plan from t would start late).
-    if (searched && now && now() - t > 0.5 * takeover_delay_s_) return out;
+    if (searched_until - t > 0.5 * takeover_delay_s_) return out;
   }
   switch (state_) {
     case FsmState::kInit:

@@ -463,6 +463,14 @@ TEST(ReplanFsm, BacksOffWhenHoldingAtTheEdgeOfTheKnownSpace) {
     }
     EXPECT_EQ(backoffs, 1);
     EXPECT_EQ(holds, 1);
+    // It backed off after max_look_holds plans cut to a hold where it was, not before.
+    int cut_holds = 0;
+    for (const ExecTrajectory& tr : log.trajectories) {
+      if (tr.escape) break;
+      cut_holds += tr.stops_before_unknown &&
+                   (tr.spline.evaluate(tr.spline.duration()) - tr.spline.evaluate(0.0)).norm() < 0.3;
+    }
+    EXPECT_GE(cut_holds, config.max_look_holds);
     EXPECT_TRUE(revealed);
     EXPECT_TRUE(log.goal_reached);
   }

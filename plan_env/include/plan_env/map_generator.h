@@ -59,6 +59,10 @@ struct ForestConfig {
 
   /// The benchmark presets above.
   static ForestConfig preset(ObstacleDensity density);
+  /// Adds a map style's obstacles to the density's: forest (none), walls (0.02 walls per m^2),
+  /// rings (0.02 rings per m^2), windows (2 window walls), boxes (half the pillars, 0.12 floating
+  /// boxes per m^2), mixed (0.01 walls and 0.01 rings per m^2, 1 window wall). False for another name.
+  bool applyStyle(const std::string& style);
   /// True when densities are finite and non-negative and every size range is positive and ordered;
   /// otherwise says why.
   bool validate(std::string* why) const;

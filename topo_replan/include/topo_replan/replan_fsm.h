@@ -371,8 +371,9 @@ class ReplanFsm {
                                                  double d0, double speed_mps, const char* what, std::string* report) const;
   /// The global route for the goals the next reference will go through, when it is stale (mutex
   /// released during the search); gives the mission up when the route proves a goal unreachable.
-  /// True when it searched.
-  bool routeLocked(double t, const EsdfMap& map, std::unique_lock<std::mutex>* lock, FsmOutput* out);
+  /// *searched_until: the clock (now(), or t) when a search ended; untouched when none ran.
+  void routeLocked(double t, const EsdfMap& map, std::unique_lock<std::mutex>* lock, FsmOutput* out,
+                   const std::function<double()>& now, double* searched_until);
   /// Ends the mission for `why` (braking first when moving), with a give_up event.
   void giveUpLocked(double t, const EsdfMap& map, GoalStatus status, ReplanStatus replan_status, const std::string& why,
                     FsmOutput* out);
@@ -433,9 +434,7 @@ class ReplanFsm {
   std::optional<Eigen::Vector3d> known_anchor_;
   Eigen::Vector3d look_hold_position_ = Eigen::Vector3d::Zero();
   bool new_mission_ = false;              // set by setGoals: the next started reference begins a mission
-  double mission_start_s_ = 0.0;
-  double last_success_s_ = -INFINITY;     // the last published plan [s]
-  uint64_t goals_epoch_ = 0;              // bumped by setGoals
+  double last_progress_s_ = 0.0;          // the mission's start or its last successful plan (not a hold) [s]
   uint64_t route_epoch_ = 0;              // bumped by setGoals, stops and odometry jumps: a route searched before is stale
   double mission_limit_s_ = INFINITY;
   double takeover_delay_s_;       // the adaptive takeover delay (tick() only writes it, under the mutex)

@@ -59,17 +59,8 @@ bool readMapGeneratorParams(const ros::NodeHandle& nh, MapGeneratorServer::Confi
   // The map style adds walls and/or rings to the density's pillars and floating boxes; explicit
   // walls_per_m2 / rings_per_m2 below override it.
   r.read("style", c.style);
-  if (c.style == "walls") {
-    f.walls_per_m2 = 0.02;
-  } else if (c.style == "rings") {
-    f.rings_per_m2 = 0.02;
-  } else if (c.style == "mixed") {
-    f.walls_per_m2 = f.rings_per_m2 = 0.01;
-  } else if (c.style == "windows") {
-    f.window_walls = 2;
-  } else if (c.style != "forest") {
-    r.errors() << "style must be forest, walls, rings, mixed or windows, not '" << c.style << "'; ";
-  }
+  if (!f.applyStyle(c.style))
+    r.errors() << "style must be forest, walls, rings, windows, boxes or mixed, not '" << c.style << "'; ";
   r.read("pillars_per_m2", f.pillars_per_m2);
   r.read("floating_per_m2", f.floating_per_m2);
   r.read("walls_per_m2", f.walls_per_m2);
