@@ -127,6 +127,9 @@ bool PathGuidedOptimizer::Config::validate(std::string* why) const {
   if (!std::isfinite(max_time_ratio) || max_time_ratio < 1.0) return fail("max_time_ratio must be >= 1");
   if (!finiteNonNegative(clearance_m) || !finiteNonNegative(check_step_m))
     return fail("clearance_m and check_step_m must be finite and >= 0");
+  if (collision_retries < 0 || !std::isfinite(collision_retry_factor) || collision_retry_factor < 1.0 ||
+      !finiteNonNegative(collision_retry_d0_step_m))
+    return fail("collision_retries must be >= 0, collision_retry_factor >= 1, collision_retry_d0_step_m >= 0");
   if (!finiteNonNegative(restart_offset_m) || !finiteNonNegative(restart_noise_m))
     return fail("restart_offset_m and restart_noise_m must be finite and >= 0");
   return true;
@@ -390,9 +393,27 @@ OptimizationResult PathGuidedOptimizer::optimize(const UniformBspline& initial, 
   const OptimizationResult warmup = guidePhase(initial, guide);
   if (warmup.status != OptimizationStatus::kSuccess) return warmup;
   OptimizationResult result = refinePhase(warmup.spline, map);
+  UniformBspline refined = result.spline;  // before finish() reallocates its time
+  if (result.status == OptimizationStatus::kSuccess) finish(map, &result);
+  Config stronger = config_;
+  for (int retry = 0; retry < config_.collision_retries && result.status == OptimizationStatus::kInCollision; ++retry) {
+    stronger.l2c *= config_.collision_retry_factor;
+    stronger.d0_m += config_.collision_retry_d0_step_m;
+    OptimizationResult again = PathGuidedOptimizer(stronger).refinePhase(refined, map);
+    again.stats.phase2_ms += result.stats.phase2_ms;
+    again.stats.check_ms += result.stats.check_ms;
+    again.stats.iterations += result.stats.iterations;
+    again.stats.runs += result.stats.runs;
+    if (again.status != OptimizationStatus::kSuccess) break;  // NLopt failed: keep the checked result
+    refined = again.spline;
+    const double check_ms = again.stats.check_ms;
+    finish(map, &again);  // the check of this optimiser's config (clearance, limits), not the stronger one's
+    again.stats.check_ms += check_ms;
+    // Costs as this optimiser weighs them, so candidates compare alike.
+    result = std::move(again);
+  }
   result.cost.guide = warmup.cost.guide;
   result.stats.phase1_ms = warmup.stats.phase1_ms;
-  if (result.status == OptimizationStatus::kSuccess) finish(map, &result);
   result.stats.total_ms = msSince(t0);
   return result;
 }

@@ -112,6 +112,28 @@ VoxelState OccupancyMap::state(const Eigen::Vector3d& point) const {
   return state(geometry_.indexOf(point));
 }
 
+bool OccupancyMap::isKnownWithin(const Eigen::Vector3d& point, double radius,
+                                 const std::function<bool(const Eigen::Vector3d&)>& assume_known) const {
+  if (!(radius >= 0.0) || radius > kMaxKnownRadius || !geometry_.inWindow(point)) return false;
+  const double half = 0.5 * geometry_.resolution(), r2 = radius * radius;
+  const Eigen::Vector3i lo = geometry_.indexOf(point - Eigen::Vector3d::Constant(radius));
+  const Eigen::Vector3i hi = geometry_.indexOf(point + Eigen::Vector3d::Constant(radius));
+  Eigen::Vector3i i;
+  for (i.z() = lo.z(); i.z() <= hi.z(); ++i.z()) {
+    for (i.y() = lo.y(); i.y() <= hi.y(); ++i.y()) {
+      for (i.x() = lo.x(); i.x() <= hi.x(); ++i.x()) {
+        if (!geometry_.inWindow(i)) continue;
+        // Distance from the point to the voxel's cube.
+        const Eigen::Vector3d gap = ((point - geometry_.centerOf(i)).cwiseAbs().array() - half).max(0.0).matrix();
+        if (gap.squaredNorm() >= r2 && !(i == geometry_.indexOf(point))) continue;
+        if (isUnknownValue(log_odds_[geometry_.address(i)]) && !(assume_known && assume_known(geometry_.centerOf(i))))
+          return false;
+      }
+    }
+  }
+  return true;
+}
+
 double OccupancyMap::probability(const Eigen::Vector3i& index) const {
   if (!geometry_.inWindow(index)) return std::numeric_limits<double>::quiet_NaN();
   const float l = log_odds_[geometry_.address(index)];

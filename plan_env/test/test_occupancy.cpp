@@ -234,6 +234,62 @@ TEST(ScrollingWindow, FusionAfterScrollMatchesAFreshMapAtThatWindow) {
       for (i.x() = w.min.x(); i.x() <= w.max.x(); ++i.x()) ASSERT_EQ(scrolled->state(i), fresh->state(i));
 }
 
+TEST(OccupancyMap, KnownWithinARadiusMeansNoUnobservedVoxelTouchesTheBall) {
+  auto map = sceneMap();
+  // One observed slab (x in [0, 2)) but for one voxel in it; the rest of the window unknown.
+  const VoxelBox w = map->geometry().windowBox();
+  const Eigen::Vector3i hole = vox(*map, {1.05, 0.05, 1.05});
+  Eigen::Vector3i i;
+  for (i.z() = w.min.z(); i.z() <= w.max.z(); ++i.z())
+    for (i.y() = w.min.y(); i.y() <= w.max.y(); ++i.y())
+      for (i.x() = w.min.x(); i.x() <= w.max.x(); ++i.x()) {
+        const double cx = map->geometry().centerOf(i).x();
+        if (cx > 0.0 && cx < 2.0 && i != hole) {
+          ASSERT_TRUE(map->setState(i, VoxelState::kFree));
+        }
+      }
+  ASSERT_EQ(map->state(hole), VoxelState::kUnknown);
+  // Brute force over the window: a ball touches an unknown voxel's cube.
+  const double half = 0.5 * map->geometry().resolution();
+  auto brute = [&](const Eigen::Vector3d& p, double r) {
+    Eigen::Vector3i j;
+    for (j.z() = w.min.z(); j.z() <= w.max.z(); ++j.z())
+      for (j.y() = w.min.y(); j.y() <= w.max.y(); ++j.y())
+        for (j.x() = w.min.x(); j.x() <= w.max.x(); ++j.x()) {
+          if (map->state(j) != VoxelState::kUnknown) continue;
+          const Eigen::Vector3d gap =
+              ((p - map->geometry().centerOf(j)).cwiseAbs().array() - half).max(0.0).matrix();
+          if (gap.norm() < r || j == map->geometry().indexOf(p)) return false;
+        }
+    return true;
+  };
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> x(-0.4, 2.4), yz(0.3, 1.7), rad(0.0, 0.45);
+  int known = 0, unknown = 0;
+  for (int k = 0; k < 400; ++k) {
+    const Eigen::Vector3d p(x(rng), yz(rng) - 1.0 + 0.05, yz(rng));
+    const double r = k % 4 == 0 ? 0.0 : rad(rng);
+    const bool expect = brute(p, r);
+    ASSERT_EQ(map->isKnownWithin(p, r), expect) << p.transpose() << " r " << r;
+    (expect ? known : unknown)++;
+  }
+  EXPECT_GT(known, 50);
+  EXPECT_GT(unknown, 50);
+  // Beside the hole: a point 0.15 m from its face is known within 0.1 m, not within 0.2 m.
+  EXPECT_TRUE(map->isKnownWithin({1.05, 0.05, 1.25}, 0.1));
+  EXPECT_FALSE(map->isKnownWithin({1.05, 0.05, 1.25}, 0.2));
+  // Unknown voxels exempted by the caller's predicate (by centre) count as known.
+  EXPECT_TRUE(map->isKnownWithin({1.05, 0.05, 1.25}, 0.2, [&](const Eigen::Vector3d& c) {
+    return (c - map->geometry().centerOf(hole)).norm() < 1e-9;
+  }));
+  EXPECT_FALSE(map->isKnownWithin({1.05, 0.05, 1.25}, 0.2, [](const Eigen::Vector3d&) { return false; }));
+  // Refused: out of the window, NaN, a negative or too large radius.
+  EXPECT_FALSE(map->isKnownWithin({50.0, 0.0, 1.0}, 0.1));
+  EXPECT_FALSE(map->isKnownWithin({std::nan(""), 0.0, 1.0}, 0.1));
+  EXPECT_FALSE(map->isKnownWithin({1.5, 1.0, 1.0}, -0.1));
+  EXPECT_FALSE(map->isKnownWithin({1.5, 1.0, 1.0}, OccupancyMap::kMaxKnownRadius + 0.1));
+}
+
 TEST(OccupancyMap, MemoryStaysSmallForALargeMap) {
   OccupancyMap::Config c;
   c.size_m = {40.0, 20.0, 5.0};

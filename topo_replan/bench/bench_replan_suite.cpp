@@ -1,5 +1,5 @@
 // make bench-replan: the paper's Table I, as a gtest executable.
-//   bench_replan_suite [--maps N] [--tasks-per-map N] [--out DIR]   (default 10 x 50 = 500 tasks per density)
+//   bench_replan_suite [--maps N] [--tasks-per-map N] [--style S] [--collision-retries N] [--out DIR]   (default 10 x 50 = 500 tasks per density)
 // Prints the Markdown table and a RESULT line; writes DIR/replan_tasks.csv (every task and method)
 // and DIR/replan_table1.md. scripts/plot_replan.py turns the CSV into DIR/replan_table1.png.
 #include <gtest/gtest.h>
@@ -20,6 +20,7 @@ std::string g_out = "results";
 TEST(ReplanSuite, TableI) {
   const std::vector<bench::TaskOutcome> outcomes =
       bench::runSuite(g_config, {ObstacleDensity::kLow, ObstacleDensity::kMedium, ObstacleDensity::kHigh});
+  ASSERT_FALSE(outcomes.empty()) << "no task ran (unknown --style?)";
   const auto summary = bench::summarize(outcomes);
   const std::string table = bench::markdownTable(summary);
   std::printf("\n%s\n", table.c_str());
@@ -44,6 +45,8 @@ int main(int argc, char** argv) {
     if (!std::strcmp(argv[i], "--maps")) g_config.maps_per_density = std::max(1, std::atoi(argv[i + 1]));
     if (!std::strcmp(argv[i], "--tasks-per-map")) g_config.tasks_per_map = std::max(1, std::atoi(argv[i + 1]));
     if (!std::strcmp(argv[i], "--out")) g_out = argv[i + 1];
+    if (!std::strcmp(argv[i], "--style")) g_config.style = argv[i + 1];
+    if (!std::strcmp(argv[i], "--collision-retries")) g_config.collision_retries = std::atoi(argv[i + 1]);
   }
   return RUN_ALL_TESTS();
 }

@@ -56,6 +56,7 @@ TopoReplanner::Config benchmarkReplannerConfig(const SuiteConfig& suite) {
   c.optimizer.max_vel_mps = suite.max_vel_mps;
   c.optimizer.max_acc_mps2 = suite.max_acc_mps2;
   c.num_threads = 2;
+  if (suite.collision_retries >= 0) c.optimizer.collision_retries = suite.collision_retries;
   if (suite.deterministic) {
     c.search.roadmap.max_time_s = 0.0;
     c.optimizer.max_time_s = 0.0;
@@ -152,7 +153,12 @@ std::vector<TaskOutcome> runSuite(const SuiteConfig& config, const std::vector<O
     for (int m = 0; m < config.maps_per_density; ++m) {
       SyntheticScene scene(config.map_size_m);
       const uint32_t map_seed = 1000u * uint32_t(density) + uint32_t(m);
-      scene.forest(density, map_seed);
+      ForestConfig forest = ForestConfig::preset(density);
+      if (!forest.applyStyle(config.style)) {
+        std::fprintf(stderr, "replan suite: unknown map style '%s'\n", config.style.c_str());
+        return {};
+      }
+      generateForest(forest, map_seed, scene.occupancy.get());
       const EsdfMap& map = scene.finish();
       const VisibilityChecker line(map, runner.config.search.clearance_m, true);
       std::mt19937 rng(map_seed * 7919u + 13u);

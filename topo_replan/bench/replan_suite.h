@@ -28,6 +28,7 @@ bool parseMethod(const std::string& s, Method* m);
 const std::vector<Method>& allMethods();
 
 struct SuiteConfig {
+  std::string style = "forest";  ///< map style (ForestConfig::applyStyle): forest, walls, rings, windows, boxes, mixed
   int maps_per_density = 10;
   int tasks_per_map = 50;
   Eigen::Vector3d map_size_m{20.0, 20.0, 3.0};
@@ -36,6 +37,7 @@ struct SuiteConfig {
   int gto_restarts = 5;
   double max_vel_mps = 3.0, max_acc_mps2 = 2.5;
   bool deterministic = true;      ///< counts only (no time limits)
+  int collision_retries = -1;     ///< PGO's collision retries; -1: the optimiser's default
 };
 
 struct TaskOutcome {

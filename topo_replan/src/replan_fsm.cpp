@@ -130,7 +130,8 @@ bool ReplanFsm::Config::validate(std::string* why) const {
   if (!(max_takeover_delay_s >= takeover_delay_s) || !(max_takeover_delay_s < 5.0))
     return bad("max_takeover_delay_s must be in [takeover_delay_s, 5)");
   if (!(replan_interval_s > 0.0)) return bad("replan_interval_s must be positive");
-  if (!(safety_clearance_m >= 0.0) || !std::isfinite(safety_clearance_m)) return bad("safety_clearance_m must be >= 0");
+  if (!(safety_clearance_m >= 0.0) || !(safety_clearance_m <= OccupancyMap::kMaxKnownRadius))
+    return bad("safety_clearance_m must be in [0, 1]");
   if (!(safety_sample_s >= 1e-3) || !std::isfinite(safety_sample_s)) return bad("safety_sample_s must be >= 0.001");
   if (!(brake_acc_mps2 > 0.0) || !std::isfinite(brake_acc_mps2)) return bad("brake_acc_mps2 must be positive");
   if (!(max_brake_acc_mps2 >= brake_acc_mps2) || !std::isfinite(max_brake_acc_mps2))
@@ -625,8 +626,17 @@ bool ReplanFsm::committable(const EsdfMap& map, const Eigen::Vector3d& p) const 
   // plan's start, each plan would commit known_start_radius_m further into unobserved space (a
   // creep at a metre per second into space the camera cannot see, e.g. above or below it).
   if (known_anchor_ && (p - *known_anchor_).norm() <= config_.known_start_radius_m) return true;
+  // Observed free with the clearance all round: the ESDF counts only observed obstacles, so a point
+  // in seen air beside an unseen face (below or beside the camera's view) would pass on distance.
+  // Around the anchor the clearance ball of every exempt point counts as known too: the camera's
+  // blind zone beside and above a vehicle that starts from a hover (its view is a cone from the
+  // camera) would otherwise hold it there.
   const DistanceQuery q = map.query(p);
-  return q.status == QueryStatus::kOk && q.distance >= config_.safety_clearance_m;
+  if (q.status != QueryStatus::kOk || q.distance < config_.safety_clearance_m) return false;
+  const double anchor_ball = config_.known_start_radius_m + config_.safety_clearance_m;
+  return map.occupancy().isKnownWithin(p, config_.safety_clearance_m, [&](const Eigen::Vector3d& c) {
+    return known_anchor_ && (c - *known_anchor_).norm() <= anchor_ball;
+  });
 }
 
 bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const EsdfMap& map, ExecTrajectory* traj,
@@ -647,7 +657,9 @@ bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const 
     const Eigen::Vector3d p = plan.evaluate(tau);
     const double s = arc.empty() ? 0.0 : arc.back() + (p - prev).norm();
     prev = p;
-    if (!committable(map, p)) {
+    // (Not the start: the vehicle is there already; e.g. beside space that became unknown when the
+    // window scrolled, it stops or moves on instead of failing every plan.)
+    if (tau > 0.0 && !committable(map, p)) {
       blocked_s = s;
       break;
     }
@@ -659,59 +671,70 @@ bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const 
   if (blocked_s < 0.0) return true;  // all of it is known free: flown as planned
 
   // The last sample from which (and from every one before it) a stop along the path at the planning
-  // deceleration ends commit_margin_m before the blocked point.
+  // deceleration ends `margin` before the blocked point. The stop is fitted as one spline with the
+  // part flown as planned, and the fit may swerve a few centimetres where the deceleration starts or
+  // ends: where that leaves the known free space (a path that runs along its edge), the stop is cut
+  // again with a wider margin.
   const double a = config_.brake_acc_mps2;
-  size_t kb = 0;
-  while (kb + 1 < taus.size() &&
-         speed[kb + 1] * speed[kb + 1] / (2.0 * a) + config_.commit_margin_m <= blocked_s - arc[kb + 1])
-    ++kb;
-  double a_stop = a;
-  const double room = blocked_s - arc[kb] - config_.commit_margin_m;
-  if (speed[kb] * speed[kb] / (2.0 * a) > room) {
-    // Even now it cannot stop before unknown space at the planning limit (the map shrank or the
-    // start is already too close): stop as hard as the vehicle allows.
-    a_stop = std::min(config_.max_brake_acc_mps2, speed[kb] * speed[kb] / (2.0 * std::max(room, 1e-3)));
-  }
-  // Flown as planned to tau_b, then a stop along the same path, refitted as one spline.
-  const double tau_b = taus[kb], v_b = speed[kb];
-  const StopProfile stop(v_b, a_stop);
-  const double T_stop = v_b > 1e-3 ? stop.duration() : 0.0, T_total = tau_b + T_stop;
-  const PathByLength path(plan, tau_b, 0.01);
   const UniformBspline acc = vel.derivative();
   const Eigen::Vector3d v0 = vel.evaluate(0.0), a0 = acc.evaluate(0.0);
-  if (T_total < 0.05 && v0.norm() < 0.05) {
-    // At rest at the edge of the known space: hold, and look where the plan goes.
-    traj->spline = UniformBspline::straightLine(start, start, 6, 3, 0.1);
-  } else {
-    const int n = std::max(6, int(std::ceil(T_total / 0.05)));
-    const double h = T_total / n;
-    std::vector<Eigen::Vector3d> points;
-    for (int k = 0; k <= n; ++k) {
-      const double tau = k * h;
-      if (tau <= tau_b) {
-        points.push_back(plan.evaluate(tau));
-      } else {
-        points.push_back(path.at(stop.distance(tau - tau_b)));
+  double tau_b = 0.0;
+  bool cut = false;
+  for (const double margin : {config_.commit_margin_m, config_.commit_margin_m + 0.15, config_.commit_margin_m + 0.4}) {
+    size_t kb = 0;
+    while (kb + 1 < taus.size() && speed[kb + 1] * speed[kb + 1] / (2.0 * a) + margin <= blocked_s - arc[kb + 1]) ++kb;
+    double a_stop = a;
+    const double room = blocked_s - arc[kb] - margin;
+    if (speed[kb] * speed[kb] / (2.0 * a) > room) {
+      // Even now it cannot stop before unknown space at the planning limit (the map shrank or the
+      // start is already too close): stop as hard as the vehicle allows.
+      a_stop = std::min(config_.max_brake_acc_mps2, speed[kb] * speed[kb] / (2.0 * std::max(room, 1e-3)));
+    }
+    // Flown as planned to tau_b, then a stop along the same path, refitted as one spline.
+    tau_b = taus[kb];
+    const double v_b = speed[kb];
+    const StopProfile stop(v_b, a_stop);
+    const double T_stop = v_b > 1e-3 ? stop.duration() : 0.0, T_total = tau_b + T_stop;
+    const PathByLength path(plan, tau_b, 0.01);
+    if (T_total < 0.05 && v0.norm() < 0.05) {
+      // At rest at the edge of the known space: hold, and look where the plan goes.
+      traj->spline = UniformBspline::straightLine(start, start, 6, 3, 0.1);
+    } else {
+      const int n = std::max(6, int(std::ceil(T_total / 0.05)));
+      const double h = T_total / n;
+      std::vector<Eigen::Vector3d> points;
+      for (int k = 0; k <= n; ++k) {
+        const double tau = k * h;
+        if (tau <= tau_b) {
+          points.push_back(plan.evaluate(tau));
+        } else {
+          points.push_back(path.at(stop.distance(tau - tau_b)));
+        }
       }
+      UniformBspline fitted;
+      if (!UniformBspline::fitToPoints(points, h, v0, a0, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), 3, &fitted)) {
+        *why = "known-space commitment: the cut trajectory could not be fitted";
+        return false;
+      }
+      traj->spline = fitted;
     }
-    UniformBspline fitted;
-    if (!UniformBspline::fitToPoints(points, h, v0, a0, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), 3, &fitted)) {
-      *why = "known-space commitment: the cut trajectory could not be fitted";
-      return false;
+    // The cut trajectory is checked as it will be flown.
+    const double D = traj->spline.duration();
+    cut = true;
+    for (double tau = 0.0;; tau = std::min(D, tau + dt)) {
+      if (tau > 0.0 && !committable(map, traj->spline.evaluate(tau))) {
+        *why = "known-space commitment: the cut trajectory leaves the known free space " + std::to_string(tau) +
+               " s after its start";
+        cut = false;
+        break;
+      }
+      if (tau >= D) break;
     }
-    traj->spline = fitted;
+    if (cut) break;
   }
-  // The cut trajectory is checked as it will be flown.
-  const double D = traj->spline.duration();
-  for (double tau = 0.0;; tau = std::min(D, tau + dt)) {
-    if (!committable(map, traj->spline.evaluate(tau))) {
-      *why = "known-space commitment: the cut trajectory leaves the known free space " + std::to_string(tau) +
-             " s after its start";
-      return false;
-    }
-    if (tau >= D) break;
-  }
-  traj->brake_start_s = t0 + std::min(tau_b, D);
+  if (!cut) return false;
+  why->clear();
+  traj->brake_start_s = t0 + std::min(tau_b, traj->spline.duration());
   traj->stops_before_unknown = true;
   // The camera should look past the stop, along the plan.
   const PathByLength ahead(plan, 0.0, 0.02);
@@ -810,6 +833,7 @@ std::optional<ExecTrajectory> ReplanFsm::restToRestLocked(const std::vector<Eige
                                                           const char* what, std::string* report) const {
   report->clear();
   const Eigen::Vector3d p0 = walk.front();
+  const FlatState s0 = takeoverStateLocked(t);  // walk.front() is its position
   std::vector<double> arc{0.0};
   for (size_t i = 1; i < walk.size(); ++i) arc.push_back(arc.back() + (walk[i] - walk[i - 1]).norm());
   const double length = arc.back();
@@ -833,7 +857,8 @@ std::optional<ExecTrajectory> ReplanFsm::restToRestLocked(const std::vector<Eige
       const double f = span > 0.0 ? std::clamp((s - arc[seg - 1]) / span, 0.0, 1.0) : 1.0;
       points.push_back(walk[seg - 1] + f * (walk[seg] - walk[seg - 1]));
     }
-    if (!UniformBspline::fitToPoints(points, T / n, zero, zero, zero, zero, 3, &escape.spline)) {
+    // It starts in the state flown there (a creep below stopped_speed_mps is not a rest: no step).
+    if (!UniformBspline::fitToPoints(points, T / n, s0.velocity, s0.acceleration, zero, zero, 3, &escape.spline)) {
       *report = std::string("no ") + what + ": the walk could not be fitted";
       return std::nullopt;
     }
@@ -848,7 +873,8 @@ std::optional<ExecTrajectory> ReplanFsm::restToRestLocked(const std::vector<Eige
     double d = 0.0;
     const Eigen::Vector3d p = escape.spline.evaluate(tau);
     const bool known = !config_.commit_to_known_space || (p - p0).norm() <= config_.known_start_radius_m ||
-                       map.query(p).status == QueryStatus::kOk;
+                       (map.query(p).status == QueryStatus::kOk &&
+                        map.occupancy().isKnownWithin(p, std::max(0.0, floor_m)));
     if (!known) {
       // Look before moving: hold here, turning the camera towards the way out (the trajectory
       // server turns to a held trajectory's heading target); the next try sees it.
@@ -1123,7 +1149,9 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
     std::optional<ExecTrajectory> backoff;
     std::string backoff_report;
     if (config_.global_route && look_holds_ >= config_.max_look_holds && backoffs_ < config_.max_backoffs) {
-      backoff = backoffTrajectoryLocked(t, map, &backoff_report);
+      // From the takeover time, as the plan it replaces (the hold published last tick may start
+      // between now and then: taking over at t would leave it out).
+      backoff = backoffTrajectoryLocked(t_take, map, &backoff_report);
       if (backoff && backoff->has_heading_target) backoff.reset();  // a look again: no use
     }
     // Holding there is no progress: it does not restart the mission's time limit, and ends the

@@ -413,7 +413,15 @@ bool TopoReplanner::repairStart(const FlatState& start, const EsdfMap& map, Unif
   if (!UniformBspline::fitToPoints(points, dt, start.velocity, start.acceleration, vel.evaluate(duration),
                                    vel.derivative().evaluate(duration), trajectory->degree(), &refit))
     return false;
-  if (checker_.check(refit, map).status != OptimizationStatus::kSuccess) return false;
+  if (checker_.check(refit, map).status != OptimizationStatus::kSuccess) {
+    // The refit breaks a limit or grazes an obstacle: refine it once more (its first and last
+    // control points, the start and end states, stay fixed), checked without stretching time.
+    const OptimizationResult again = checker_.refinePhase(refit, map);
+    if (again.status != OptimizationStatus::kSuccess) return false;
+    const OptimizationResult checked = checker_.check(again.spline, map);
+    if (checked.status != OptimizationStatus::kSuccess) return false;
+    refit = checked.spline;
+  }
   *trajectory = refit;
   return true;
 }

@@ -56,7 +56,7 @@ struct OptimizationStats {
   double total_ms = 0.0;
   int iterations = 0;      ///< phase-2 objective evaluations (NLopt's budget unit), summed over restarts
   int nlopt_result = 0;    ///< NLopt's result code of the (chosen) run; see nlopt.h
-  int runs = 0;            ///< phase-2 runs (1, or n for gtoWithRestarts)
+  int runs = 0;            ///< phase-2 runs (1, n for gtoWithRestarts, more after collision retries)
   int best_run = 0;        ///< the run the result comes from (0 = unperturbed)
   double time_ratio = 1.0;     ///< duration after / before time reallocation
   double min_clearance_m = 0.0;  ///< smallest ESDF distance over the curve samples [m]
@@ -100,6 +100,13 @@ class PathGuidedOptimizer {
     double clearance_m = 0.25;    ///< every curve sample keeps at least this ESDF distance [m]
     double check_step_m = 0.0;    ///< arc-length step of the collision check [m]; 0 = half a voxel
     bool unknown_is_free = true;  ///< unknown voxels pass the check (replanning in a partial map)
+    // PGO's second chance: a refined curve that fails the check in collision (the cost, on control
+    // points, is met while the curve between them cuts a corner, or smoothness and feasibility
+    // outweighed it in a narrow opening) is refined again from where it ended, each time with the
+    // collision weight times collision_retry_factor and d0 raised by collision_retry_d0_step_m.
+    int collision_retries = 2;             ///< extra refine runs at most (0 = the paper's single run)
+    double collision_retry_factor = 4.0;   ///< l2c multiplier per extra run (>= 1)
+    double collision_retry_d0_step_m = 0.1;  ///< d0_m increase per extra run [m]
     // GTO with random restarts: restart r > 0 starts from the initial spline plus a smooth lateral
     // bump (zero at the fixed ends) and per-point noise.
     double restart_offset_m = 1.5;  ///< largest bump, uniform in [0, this], perpendicular to start-goal [m]
@@ -125,7 +132,8 @@ class PathGuidedOptimizer {
   /// Time reallocation and final check of a spline (status, costs and stats filled).
   OptimizationResult check(const UniformBspline& spline, const EsdfMap& map) const;
 
-  /// PGO: phase 1, phase 2, time reallocation, final check.
+  /// PGO: phase 1, phase 2, time reallocation, final check (phase 2 again, up to
+  /// collision_retries times, while the check finds a collision).
   OptimizationResult optimize(const UniformBspline& initial, const Path& guide, const EsdfMap& map) const;
   /// Baseline GTO: phase 2 from the initial spline, time reallocation, final check.
   OptimizationResult gto(const UniformBspline& initial, const EsdfMap& map) const;

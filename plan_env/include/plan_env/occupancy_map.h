@@ -18,6 +18,7 @@
 // (e.g. the mapping node) serialises them, typically with a std::shared_mutex.
 
 #include <Eigen/Geometry>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -86,6 +87,15 @@ class OccupancyMap {
   VoxelState state(const Eigen::Vector3i& index) const;
   VoxelState state(const Eigen::Vector3d& point) const;
   bool isOccupied(const Eigen::Vector3i& index) const { return state(index) == VoxelState::kOccupied; }
+  /// Largest radius isKnownWithin() accepts [m] (a bound on its work per call).
+  static constexpr double kMaxKnownRadius = 1.0;
+  /// True when every window voxel whose cube comes closer than `radius` to `point` has been observed
+  /// (free or occupied): a body of that radius there touches no unobserved space. Voxels outside
+  /// the window are not checked (the window's edge is the map's). False for a point outside the
+  /// window, a NaN/inf point, or a radius outside [0, kMaxKnownRadius]. `assume_known(centre)`, when
+  /// given, exempts unknown voxels by their centre (e.g. the space a vehicle stood in).
+  bool isKnownWithin(const Eigen::Vector3d& point, double radius,
+                     const std::function<bool(const Eigen::Vector3d&)>& assume_known = {}) const;
   /// Occupancy probability of a voxel; NaN when unknown or out of the map.
   double probability(const Eigen::Vector3i& index) const;
 

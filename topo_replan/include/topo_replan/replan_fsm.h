@@ -55,7 +55,9 @@
 // path). The replanner plans optimistically: unknown space counts as free, so it explores. What the
 // FSM publishes is cut to what is known: the plan is flown as planned while, at every instant, a
 // stop along its path at brake_acc_mps2 would end before the first point of the path that is not
-// observed free (or comes within safety_clearance_m of an obstacle); from the last such instant
+// observed free with all the voxels within safety_clearance_m of it observed (the ESDF counts only
+// observed obstacles: a point in seen air beside a face the camera never saw, below or beside its
+// view, would pass on distance alone), or comes within safety_clearance_m of an obstacle; from the last such instant
 // (brake_start_s) the published trajectory brakes along the same path to rest. So at every instant
 // of every published trajectory the vehicle can stop, at the planning deceleration, in space the
 // map has observed free; if no later plan comes, it does stop there. A new plan takes over before
@@ -234,8 +236,9 @@ class ReplanFsm {
     // Known-space commitment (see the class comment).
     bool commit_to_known_space = true;  ///< false: publish plans through unknown space as planned (optimistic)
     /// Path points this close to where a mission started from a hover (or the vehicle was re-anchored)
-    /// count as known: the vehicle is there, though the camera cannot see its own position. Not around
-    /// every plan's start: plans would creep into unobserved space by this much each [m].
+    /// count as known, with their clearance balls: the vehicle is there, though the camera cannot see
+    /// its own position nor beside it. Not around every plan's start: plans would creep into
+    /// unobserved space by this much each [m].
     double known_start_radius_m = 0.3;
     double commit_margin_m = 0.1;       ///< the committed stop ends this far before unknown space [m]
 
@@ -340,8 +343,9 @@ class ReplanFsm {
   ExecTrajectory brakingTrajectory(double t, const EsdfMap& map, std::string* report,
                                    const FlatState* from = nullptr) const;
   /// A point of `map` the committed part of a trajectory may cross: observed free (all 8 voxels
-  /// around it), at least safety_clearance_m from obstacles; or within known_start_radius_m of the
-  /// known anchor (known_anchor_).
+  /// around it), at least safety_clearance_m from obstacles, and every voxel within
+  /// safety_clearance_m of it observed (or within known_start_radius_m + safety_clearance_m of the
+  /// known anchor); or within known_start_radius_m of the known anchor (known_anchor_).
   bool committable(const EsdfMap& map, const Eigen::Vector3d& p) const;
   /// The known-space commitment of a plan starting at t0 (see the class comment): fills traj->spline,
   /// brake_start_s, stops_before_unknown and the heading target; false (with why) when the cut

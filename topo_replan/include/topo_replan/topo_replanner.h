@@ -10,8 +10,9 @@
 // Start state: the optimiser keeps the start control points, but its time reallocation (stretching
 // the knot span to meet the limits) scales the start velocity and acceleration too. The chosen
 // trajectory is then refitted through its own knot positions with the exact start derivatives and
-// checked again (without reallocation); when that refit fails the check the stretched trajectory
-// is kept and the velocity step is reported (stats.start_velocity_jump_mps).
+// checked again (without reallocation); when that refit fails the check it is refined once more
+// (start and end states fixed) and checked; when that fails too the stretched trajectory is kept
+// and the velocity step is reported (stats.start_velocity_jump_mps).
 //
 // Selection: among the candidates that passed the optimiser's final check (collision-free along the
 // curve at its clearance, velocity and acceleration within limits), the one with the least
