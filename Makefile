@@ -45,7 +45,7 @@ bench-camera: build
 # The paper's Table I: table on stdout, results/replan_tasks.csv, results/replan_table1.{md,png}.
 bench-replan: build
 	@mkdir -p results
-	cd $(WS) && catkin_make -j$(JOBS) $(CATKIN_ARGS) bench_replan_suite >/dev/null
+	cd $(WS) && catkin_make -j$(JOBS) $(CATKIN_ARGS) topo_planner_bench_replan_suite >/dev/null
 	$(call BIN,$(WS))/bench_replan_suite --out $(ROOT)/results $(BENCH_ARGS)
 	/usr/bin/python3 scripts/plot_replan.py results/replan_tasks.csv results/replan_table1.png
 

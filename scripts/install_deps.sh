@@ -7,6 +7,7 @@ set -euo pipefail
 PACKAGES=(
   # build
   build-essential cmake catkin python3-catkin-pkg googletest libgtest-dev
+  catkin-tools  # catkin build, for the name-clash check of make test
   # ROS 1 (Debian)
   ros-base-dev libroscpp-dev rosout rosbash python3-roslaunch python3-rostest librostest-dev
   ros-message-generation ros-message-runtime libmessage-filters-dev

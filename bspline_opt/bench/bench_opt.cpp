@@ -16,12 +16,12 @@
 #include <random>
 #include <string>
 
-#include "plan_env/synthetic_scene.h"
-#include "plan_env/timing.h"
-#include "bspline_opt/path_guided_optimizer.h"
-#include "path_searching/grid_astar.h"
-#include "path_searching/path_shortener.h"
-#include "plan_env/map_generator.h"
+#include "topo_planner/plan_env/synthetic_scene.h"
+#include "topo_planner/plan_env/timing.h"
+#include "topo_planner/bspline_opt/path_guided_optimizer.h"
+#include "topo_planner/path_searching/grid_astar.h"
+#include "topo_planner/path_searching/path_shortener.h"
+#include "topo_planner/plan_env/map_generator.h"
 
 using namespace topo_planner;
 

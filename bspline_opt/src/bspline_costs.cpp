@@ -1,4 +1,4 @@
-#include "bspline_opt/bspline_costs.h"
+#include "topo_planner/bspline_opt/bspline_costs.h"
 
 #include <algorithm>
 #include <cassert>

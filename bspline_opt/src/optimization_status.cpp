@@ -1,4 +1,4 @@
-#include "bspline_opt/optimization_status.h"
+#include "topo_planner/bspline_opt/optimization_status.h"
 
 namespace topo_planner {
 

@@ -1,4 +1,4 @@
-#include "bspline_opt/path_guided_optimizer.h"
+#include "topo_planner/bspline_opt/path_guided_optimizer.h"
 
 #include <nlopt.hpp>
 
@@ -9,7 +9,7 @@
 #include <limits>
 #include <random>
 
-#include "bspline_opt/bspline_costs.h"
+#include "topo_planner/bspline_opt/bspline_costs.h"
 
 namespace topo_planner {
 namespace {

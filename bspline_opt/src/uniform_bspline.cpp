@@ -1,4 +1,4 @@
-#include "bspline_opt/uniform_bspline.h"
+#include "topo_planner/bspline_opt/uniform_bspline.h"
 
 #include <Eigen/LU>
 #include <algorithm>

@@ -6,9 +6,9 @@
 #include <functional>
 #include <random>
 
-#include "bspline_opt/bspline_costs.h"
-#include "bspline_opt/path_guided_optimizer.h"
-#include "plan_env/synthetic_scene.h"
+#include "topo_planner/bspline_opt/bspline_costs.h"
+#include "topo_planner/bspline_opt/path_guided_optimizer.h"
+#include "topo_planner/plan_env/synthetic_scene.h"
 
 namespace topo_planner {
 namespace {

@@ -5,10 +5,10 @@
 #include <random>
 #include <thread>
 
-#include "bspline_opt/path_guided_optimizer.h"
-#include "path_searching/grid_astar.h"
-#include "path_searching/path_shortener.h"
-#include "plan_env/synthetic_scene.h"
+#include "topo_planner/bspline_opt/path_guided_optimizer.h"
+#include "topo_planner/path_searching/grid_astar.h"
+#include "topo_planner/path_searching/path_shortener.h"
+#include "topo_planner/plan_env/synthetic_scene.h"
 
 namespace topo_planner {
 namespace {

@@ -6,7 +6,7 @@
 #include <functional>
 #include <random>
 
-#include "bspline_opt/uniform_bspline.h"
+#include "topo_planner/bspline_opt/uniform_bspline.h"
 
 namespace topo_planner {
 namespace {

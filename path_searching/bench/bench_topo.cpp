@@ -11,10 +11,10 @@
 #include <random>
 #include <string>
 
-#include "plan_env/synthetic_scene.h"
-#include "plan_env/timing.h"
-#include "path_searching/topo_path_search.h"
-#include "plan_env/map_generator.h"
+#include "topo_planner/plan_env/synthetic_scene.h"
+#include "topo_planner/plan_env/timing.h"
+#include "topo_planner/path_searching/topo_path_search.h"
+#include "topo_planner/plan_env/map_generator.h"
 
 using namespace topo_planner;
 

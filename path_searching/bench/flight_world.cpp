@@ -16,9 +16,9 @@
 #include <string>
 #include <vector>
 
-#include "path_searching/global_router.h"
-#include "plan_env/map_io.h"
-#include "plan_env/synthetic_scene.h"
+#include "topo_planner/path_searching/global_router.h"
+#include "topo_planner/plan_env/map_io.h"
+#include "topo_planner/plan_env/synthetic_scene.h"
 
 using namespace topo_planner;
 

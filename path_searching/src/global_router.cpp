@@ -1,4 +1,4 @@
-#include "path_searching/global_router.h"
+#include "topo_planner/path_searching/global_router.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "path_searching/grid_astar.h"
+#include "topo_planner/path_searching/grid_astar.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "path_searching/path.h"
+#include "topo_planner/path_searching/path.h"
 
 #include <algorithm>
 #include <cmath>

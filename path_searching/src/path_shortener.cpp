@@ -1,4 +1,4 @@
-#include "path_searching/path_shortener.h"
+#include "topo_planner/path_searching/path_shortener.h"
 
 namespace topo_planner {
 

@@ -1,4 +1,4 @@
-#include "path_searching/search_status.h"
+#include "topo_planner/path_searching/search_status.h"
 
 namespace topo_planner {
 

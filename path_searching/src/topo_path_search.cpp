@@ -1,4 +1,4 @@
-#include "path_searching/topo_path_search.h"
+#include "topo_planner/path_searching/topo_path_search.h"
 
 #include <algorithm>
 #include <chrono>

@@ -1,4 +1,4 @@
-#include "path_searching/topological_roadmap.h"
+#include "topo_planner/path_searching/topological_roadmap.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,9 +1,9 @@
-#include "path_searching/visibility.h"
+#include "topo_planner/path_searching/visibility.h"
 
 #include <algorithm>
 #include <cmath>
 
-#include "plan_env/raycast.h"
+#include "topo_planner/plan_env/raycast.h"
 
 namespace topo_planner {
 

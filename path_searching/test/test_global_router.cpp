@@ -2,9 +2,9 @@
 // clearance and height band, and starts from a hover closer to an obstacle than its clearance.
 #include <gtest/gtest.h>
 
-#include "path_searching/global_router.h"
-#include "path_searching/topo_path_search.h"
-#include "plan_env/synthetic_scene.h"
+#include "topo_planner/path_searching/global_router.h"
+#include "topo_planner/path_searching/topo_path_search.h"
+#include "topo_planner/plan_env/synthetic_scene.h"
 
 namespace topo_planner {
 namespace {

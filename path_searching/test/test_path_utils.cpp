@@ -1,8 +1,8 @@
 #include <gtest/gtest.h>
 
-#include "path_searching/path.h"
-#include "path_searching/visibility.h"
-#include "plan_env/synthetic_scene.h"
+#include "topo_planner/path_searching/path.h"
+#include "topo_planner/path_searching/visibility.h"
+#include "topo_planner/plan_env/synthetic_scene.h"
 
 namespace topo_planner {
 namespace {

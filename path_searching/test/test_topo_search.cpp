@@ -6,10 +6,10 @@
 #include <random>
 #include <new>
 
-#include "path_searching/grid_astar.h"
-#include "plan_env/raycast.h"
-#include "path_searching/topo_path_search.h"
-#include "plan_env/synthetic_scene.h"
+#include "topo_planner/path_searching/grid_astar.h"
+#include "topo_planner/plan_env/raycast.h"
+#include "topo_planner/path_searching/topo_path_search.h"
+#include "topo_planner/plan_env/synthetic_scene.h"
 
 // Live heap bytes of this test binary, for the memory test: every replaceable form of global new
 // and delete goes through these two (under AddressSanitizer too).

@@ -1,4 +1,4 @@
-#include "plan_env/depth_image.h"
+#include "topo_planner/plan_env/depth_image.h"
 
 #include <cmath>
 #include <cstring>

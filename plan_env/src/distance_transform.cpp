@@ -1,4 +1,4 @@
-#include "plan_env/distance_transform.h"
+#include "topo_planner/plan_env/distance_transform.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "plan_env/esdf_map.h"
+#include "topo_planner/plan_env/esdf_map.h"
 
 #include <algorithm>
 #include <cassert>
@@ -6,7 +6,7 @@
 #include <cmath>
 #include <sstream>
 
-#include "plan_env/distance_transform.h"
+#include "topo_planner/plan_env/distance_transform.h"
 
 namespace topo_planner {
 

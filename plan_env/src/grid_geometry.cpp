@@ -1,4 +1,4 @@
-#include "plan_env/grid_geometry.h"
+#include "topo_planner/plan_env/grid_geometry.h"
 
 #include <cassert>
 

@@ -1,4 +1,4 @@
-#include "plan_env/map_generator.h"
+#include "topo_planner/plan_env/map_generator.h"
 
 #include <cmath>
 #include <random>

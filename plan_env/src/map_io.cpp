@@ -1,4 +1,4 @@
-#include "plan_env/map_io.h"
+#include "topo_planner/plan_env/map_io.h"
 
 #include <octomap/OcTree.h>
 #include <pcl/io/pcd_io.h>

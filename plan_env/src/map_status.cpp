@@ -1,4 +1,4 @@
-#include "plan_env/map_status.h"
+#include "topo_planner/plan_env/map_status.h"
 
 namespace topo_planner {
 

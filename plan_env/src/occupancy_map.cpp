@@ -1,11 +1,11 @@
-#include "plan_env/occupancy_map.h"
+#include "topo_planner/plan_env/occupancy_map.h"
 
 #include <cmath>
 #include <limits>
 #include <new>
 #include <sstream>
 
-#include "plan_env/raycast.h"
+#include "topo_planner/plan_env/raycast.h"
 
 namespace topo_planner {
 

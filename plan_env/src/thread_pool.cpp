@@ -1,4 +1,4 @@
-#include "plan_env/thread_pool.h"
+#include "topo_planner/plan_env/thread_pool.h"
 
 #include <cassert>
 

@@ -5,7 +5,7 @@
 #include <fstream>
 #include <limits>
 
-#include "plan_env/map_io.h"
+#include "topo_planner/plan_env/map_io.h"
 #include "test_helpers.h"
 
 namespace topo_planner {

@@ -3,9 +3,9 @@
 
 #include <random>
 
-#include "plan_env/distance_transform.h"
-#include "plan_env/esdf_map.h"
-#include "plan_env/synthetic_scene.h"
+#include "topo_planner/plan_env/distance_transform.h"
+#include "topo_planner/plan_env/esdf_map.h"
+#include "topo_planner/plan_env/synthetic_scene.h"
 #include "test_helpers.h"
 
 namespace topo_planner {

@@ -8,9 +8,9 @@
 #include <random>
 #include <vector>
 
-#include "plan_env/depth_image.h"
-#include "plan_env/esdf_map.h"
-#include "plan_env/occupancy_map.h"
+#include "topo_planner/plan_env/depth_image.h"
+#include "topo_planner/plan_env/esdf_map.h"
+#include "topo_planner/plan_env/occupancy_map.h"
 
 namespace topo_planner {
 namespace test {

@@ -7,7 +7,7 @@
 #include <cmath>
 #include <cstdint>
 
-#include "plan_env/map_generator.h"
+#include "topo_planner/plan_env/map_generator.h"
 #include "test_helpers.h"
 
 namespace topo_planner {

@@ -4,7 +4,7 @@
 #include <cstdio>
 #include <random>
 
-#include "plan_env/map_io.h"
+#include "topo_planner/plan_env/map_io.h"
 #include "test_helpers.h"
 
 namespace topo_planner {

@@ -4,7 +4,7 @@
 #include <random>
 #include <set>
 
-#include "plan_env/raycast.h"
+#include "topo_planner/plan_env/raycast.h"
 #include "test_helpers.h"
 
 namespace topo_planner {

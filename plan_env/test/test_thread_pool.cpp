@@ -4,7 +4,7 @@
 #include <stdexcept>
 #include <thread>
 
-#include "plan_env/thread_pool.h"
+#include "topo_planner/plan_env/thread_pool.h"
 
 namespace topo_planner {
 namespace {

@@ -11,9 +11,9 @@
 #include <cstring>
 #include <string>
 
-#include "plan_env/timing.h"
-#include "plan_env/esdf_map.h"
-#include "plan_env/map_io.h"
+#include "topo_planner/plan_env/timing.h"
+#include "topo_planner/plan_env/esdf_map.h"
+#include "topo_planner/plan_env/map_io.h"
 #include "voxel_depth_renderer.h"
 
 using namespace topo_planner;

@@ -7,9 +7,9 @@
 #include <cmath>
 #include <vector>
 
-#include "plan_env/depth_image.h"
-#include "plan_env/occupancy_map.h"
-#include "plan_env/raycast.h"
+#include "topo_planner/plan_env/depth_image.h"
+#include "topo_planner/plan_env/occupancy_map.h"
+#include "topo_planner/plan_env/raycast.h"
 
 namespace topo_planner {
 

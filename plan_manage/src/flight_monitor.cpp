@@ -1,4 +1,4 @@
-#include "plan_manage/flight_monitor.h"
+#include "topo_planner/plan_manage/flight_monitor.h"
 
 #include <geometry_msgs/PoseStamped.h>
 #include <topo_planner/FlightResult.h>
@@ -9,8 +9,8 @@
 #include <filesystem>
 #include <sstream>
 
-#include "uav_sim/ros/conversions.h"
-#include "uav_sim/ros/param_reader.h"
+#include "topo_planner/uav_sim/ros/conversions.h"
+#include "topo_planner/uav_sim/ros/param_reader.h"
 
 namespace topo_planner {
 

@@ -1,4 +1,4 @@
-#include "plan_manage/flight_monitor_core.h"
+#include "topo_planner/plan_manage/flight_monitor_core.h"
 
 #include <algorithm>
 #include <cassert>
@@ -8,7 +8,7 @@
 #include <fstream>
 #include <sstream>
 
-#include "plan_env/timing.h"
+#include "topo_planner/plan_env/timing.h"
 
 namespace topo_planner {
 

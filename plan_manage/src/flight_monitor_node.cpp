@@ -1,7 +1,7 @@
 // Flight monitor node: topics and parameters are documented in plan_manage/flight_monitor.h.
 #include <ros/ros.h>
 
-#include "plan_manage/flight_monitor.h"
+#include "topo_planner/plan_manage/flight_monitor.h"
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "flight_monitor");

@@ -1,7 +1,7 @@
 // Occupancy + ESDF mapping node: topics and parameters are documented in plan_manage/mapping_server.h.
 #include <ros/ros.h>
 
-#include "plan_manage/mapping_server.h"
+#include "topo_planner/plan_manage/mapping_server.h"
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "mapping_node");

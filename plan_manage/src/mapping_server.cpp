@@ -1,4 +1,4 @@
-#include "plan_manage/mapping_server.h"
+#include "topo_planner/plan_manage/mapping_server.h"
 
 #include <algorithm>
 #include <chrono>
@@ -7,8 +7,8 @@
 #include <sstream>
 #include <utility>
 
-#include "plan_env/map_io.h"
-#include "uav_sim/ros/param_reader.h"
+#include "topo_planner/plan_env/map_io.h"
+#include "topo_planner/uav_sim/ros/param_reader.h"
 
 namespace topo_planner {
 

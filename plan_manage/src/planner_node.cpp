@@ -1,7 +1,7 @@
 // Replanning node (FSM + mapping in one process): topics and parameters in plan_manage/planner_server.h.
 #include <ros/ros.h>
 
-#include "plan_manage/planner_server.h"
+#include "topo_planner/plan_manage/planner_server.h"
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "planner_node");

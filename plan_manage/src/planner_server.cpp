@@ -1,4 +1,4 @@
-#include "plan_manage/planner_server.h"
+#include "topo_planner/plan_manage/planner_server.h"
 
 #include <visualization_msgs/MarkerArray.h>
 
@@ -6,11 +6,11 @@
 #include <cmath>
 #include <random>
 
-#include "plan_manage/trajectory_conversions.h"
+#include "topo_planner/plan_manage/trajectory_conversions.h"
 #include "topo_planner/Bspline.h"
 #include "topo_planner/PlannerHeartbeat.h"
 #include "topo_planner/ReplanEvent.h"
-#include "uav_sim/ros/param_reader.h"
+#include "topo_planner/uav_sim/ros/param_reader.h"
 
 namespace topo_planner {
 

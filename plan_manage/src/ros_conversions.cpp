@@ -1,4 +1,4 @@
-#include "plan_manage/ros_conversions.h"
+#include "topo_planner/plan_manage/ros_conversions.h"
 
 #include <sensor_msgs/PointField.h>
 #include <sensor_msgs/image_encodings.h>

@@ -1,12 +1,13 @@
-#include "plan_manage/traj_server.h"
+#include "topo_planner/plan_manage/traj_server.h"
 
 #include <geometry_msgs/PoseStamped.h>
 #include <geometry_msgs/TwistStamped.h>
 
 #include <cmath>
 
-#include "plan_manage/trajectory_conversions.h"
-#include "uav_sim/ros/param_reader.h"
+#include "topo_planner/plan_manage/setpoint_messages.h"
+#include "topo_planner/plan_manage/trajectory_conversions.h"
+#include "topo_planner/uav_sim/ros/param_reader.h"
 
 namespace topo_planner {
 
@@ -19,6 +20,12 @@ TrajServer::TrajServer(const ros::NodeHandle& nh, const Config& config)
   cmd_pub_ = nh_.advertise<PositionCommand>("position_cmd", 10);
   pose_pub_ = nh_.advertise<geometry_msgs::PoseStamped>("setpoint_pose", 10);
   twist_pub_ = nh_.advertise<geometry_msgs::TwistStamped>("setpoint_twist", 10);
+#ifdef TOPO_PLANNER_HAVE_QUADROTOR_MSGS
+  quadrotor_pub_ = nh_.advertise<quadrotor_msgs::PositionCommand>("quadrotor_cmd", 10);
+#endif
+#ifdef TOPO_PLANNER_HAVE_MAVROS_MSGS
+  mavros_pub_ = nh_.advertise<mavros_msgs::PositionTarget>("mavros_setpoint", 10);
+#endif
   timer_ = nh_.createTimer(ros::Duration(1.0 / config_.rate_hz), &TrajServer::timerCallback, this);
 }
 
@@ -137,6 +144,12 @@ void TrajServer::timerCallback(const ros::TimerEvent&) {
   twist.twist.linear.z = sp.state.velocity.z();
   twist.twist.angular.z = sp.yaw_rate;
   twist_pub_.publish(twist);
+#ifdef TOPO_PLANNER_HAVE_QUADROTOR_MSGS
+  quadrotor_pub_.publish(toQuadrotorCommand(sp, now, config_.frame_id));
+#endif
+#ifdef TOPO_PLANNER_HAVE_MAVROS_MSGS
+  mavros_pub_.publish(toPositionTarget(sp, now, config_.frame_id));
+#endif
 }
 
 bool readTrajServerParams(const ros::NodeHandle& nh, TrajServer::Config* config) {

@@ -2,7 +2,7 @@
 // and time-jump handling (plan_manage/traj_server.h).
 #include <ros/ros.h>
 
-#include "plan_manage/traj_server.h"
+#include "topo_planner/plan_manage/traj_server.h"
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "traj_server_node");

@@ -1,4 +1,4 @@
-#include "plan_manage/trajectory_conversions.h"
+#include "topo_planner/plan_manage/trajectory_conversions.h"
 
 #include <algorithm>
 #include <cmath>

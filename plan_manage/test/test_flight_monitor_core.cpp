@@ -16,9 +16,9 @@
 #include <string>
 #include <vector>
 
-#include "plan_env/synthetic_scene.h"
-#include "plan_env/timing.h"
-#include "plan_manage/flight_monitor_core.h"
+#include "topo_planner/plan_env/synthetic_scene.h"
+#include "topo_planner/plan_env/timing.h"
+#include "topo_planner/plan_manage/flight_monitor_core.h"
 
 namespace topo_planner {
 namespace {

@@ -13,8 +13,8 @@
 #include <iomanip>
 #include <sstream>
 
-#include "plan_env/timing.h"
-#include "plan_env/map_io.h"
+#include "topo_planner/plan_env/timing.h"
+#include "topo_planner/plan_env/map_io.h"
 #include "replan_suite.h"
 
 using namespace topo_planner;

@@ -10,10 +10,10 @@
 #include <set>
 #include <sstream>
 
-#include "path_searching/path_shortener.h"
-#include "plan_env/map_generator.h"
-#include "plan_env/synthetic_scene.h"
-#include "plan_env/timing.h"
+#include "topo_planner/path_searching/path_shortener.h"
+#include "topo_planner/plan_env/map_generator.h"
+#include "topo_planner/plan_env/synthetic_scene.h"
+#include "topo_planner/plan_env/timing.h"
 
 namespace topo_planner {
 namespace bench {

@@ -16,8 +16,8 @@
 #include <string>
 #include <vector>
 
-#include "plan_env/map_generator.h"
-#include "topo_replan/topo_replanner.h"
+#include "topo_planner/plan_env/map_generator.h"
+#include "topo_planner/topo_replan/topo_replanner.h"
 
 namespace topo_planner {
 namespace bench {

@@ -1,4 +1,4 @@
-#include "topo_replan/polynomial_trajectory.h"
+#include "topo_planner/topo_replan/polynomial_trajectory.h"
 
 #include <Eigen/Dense>
 #include <algorithm>

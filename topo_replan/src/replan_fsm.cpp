@@ -1,4 +1,4 @@
-#include "topo_replan/replan_fsm.h"
+#include "topo_planner/topo_replan/replan_fsm.h"
 
 #include <algorithm>
 #include <cmath>

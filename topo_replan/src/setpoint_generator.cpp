@@ -1,4 +1,4 @@
-#include "topo_replan/setpoint_generator.h"
+#include "topo_planner/topo_replan/setpoint_generator.h"
 
 #include <algorithm>
 #include <cmath>

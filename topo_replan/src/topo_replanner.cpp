@@ -1,4 +1,4 @@
-#include "topo_replan/topo_replanner.h"
+#include "topo_planner/topo_replan/topo_replanner.h"
 
 #include <algorithm>
 #include <chrono>
@@ -6,7 +6,7 @@
 #include <iomanip>
 #include <sstream>
 
-#include "path_searching/path_shortener.h"
+#include "topo_planner/path_searching/path_shortener.h"
 
 namespace topo_planner {
 

@@ -1,6 +1,6 @@
 #include <gtest/gtest.h>
 
-#include "topo_replan/polynomial_trajectory.h"
+#include "topo_planner/topo_replan/polynomial_trajectory.h"
 
 namespace topo_planner {
 namespace {

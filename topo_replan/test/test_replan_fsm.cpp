@@ -11,9 +11,9 @@
 #include <optional>
 #include <thread>
 
-#include "plan_env/synthetic_scene.h"
-#include "topo_replan/replan_fsm.h"
-#include "topo_replan/setpoint_generator.h"
+#include "topo_planner/plan_env/synthetic_scene.h"
+#include "topo_planner/topo_replan/replan_fsm.h"
+#include "topo_planner/topo_replan/setpoint_generator.h"
 
 namespace topo_planner {
 namespace {
@@ -94,7 +94,7 @@ template <typename MapAt>
 FlightLog fly(ReplanFsm* fsm, const Eigen::Vector3d& start, const std::vector<Eigen::Vector3d>& goals, MapAt mapAt,
               int ticks, const EsdfMap& truth, const Faults& faults = Faults()) {
   FlightLog log;
-  PerfectVehicle vehicle{start};
+  PerfectVehicle vehicle{start, Eigen::Vector3d::Zero(), {}};
   const double dt = 0.05;
   EXPECT_TRUE(fsm->setOdometry(0.0, vehicle.position, vehicle.velocity));
   fsm->setDepthFused(0.0);
@@ -680,7 +680,7 @@ TEST(ReplanFsm, TickSafetyAndOdometryFromThreeThreads) {
   ASSERT_EQ(fsm->setGoals({{22, 4, 1.5}}), GoalStatus::kAccepted);
   std::thread odometry([&] {
     while (!done) {
-      PerfectVehicle v{Eigen::Vector3d(1, 4, 1.5)};
+      PerfectVehicle v{Eigen::Vector3d(1, 4, 1.5), Eigen::Vector3d::Zero(), {}};
       const double t = clock;
       v.follow(*fsm, t);
       fsm->setOdometry(t, v.position, v.velocity);
@@ -973,7 +973,7 @@ TEST(ReplanFsm, AStopBeforeAPendingTakeoverStartsFromTheTrajectoryFlown) {
   config.takeover_delay_s = 0.4;  // room for the odometry timeout (0.25 s) before the takeover
   config.max_takeover_delay_s = 0.5;
   auto fsm = makeFsm(config);
-  PerfectVehicle vehicle{Eigen::Vector3d(1, 4, 1.5)};
+  PerfectVehicle vehicle{Eigen::Vector3d(1, 4, 1.5), Eigen::Vector3d::Zero(), {}};
   ASSERT_TRUE(fsm->setOdometry(0.0, vehicle.position, vehicle.velocity));
   ASSERT_EQ(fsm->setGoals({{22, 4, 1.5}}), GoalStatus::kAccepted);
   std::optional<ExecTrajectory> flown, pending;

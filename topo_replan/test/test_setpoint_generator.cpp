@@ -7,7 +7,7 @@
 #include <cmath>
 #include <vector>
 
-#include "topo_replan/setpoint_generator.h"
+#include "topo_planner/topo_replan/setpoint_generator.h"
 
 namespace topo_planner {
 namespace {

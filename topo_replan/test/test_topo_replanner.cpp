@@ -5,8 +5,8 @@
 #include <functional>
 #include <memory>
 
-#include "plan_env/synthetic_scene.h"
-#include "topo_replan/topo_replanner.h"
+#include "topo_planner/plan_env/synthetic_scene.h"
+#include "topo_planner/topo_replan/topo_replanner.h"
 
 namespace topo_planner {
 namespace {

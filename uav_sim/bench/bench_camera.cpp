@@ -17,9 +17,9 @@
 #include <string>
 #include <vector>
 
-#include "plan_env/synthetic_scene.h"
-#include "plan_env/timing.h"
-#include "uav_sim/depth_camera.h"
+#include "topo_planner/plan_env/synthetic_scene.h"
+#include "topo_planner/plan_env/timing.h"
+#include "topo_planner/uav_sim/depth_camera.h"
 
 using namespace topo_planner;
 

@@ -1,11 +1,11 @@
-#include "uav_sim/depth_camera.h"
+#include "topo_planner/uav_sim/depth_camera.h"
 
 #include <algorithm>
 #include <array>
 #include <cassert>
 #include <cmath>
 
-#include "plan_env/raycast.h"
+#include "topo_planner/plan_env/raycast.h"
 
 namespace topo_planner {
 

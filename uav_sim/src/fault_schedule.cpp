@@ -1,4 +1,4 @@
-#include "uav_sim/fault_schedule.h"
+#include "topo_planner/uav_sim/fault_schedule.h"
 
 #include <algorithm>
 #include <cmath>

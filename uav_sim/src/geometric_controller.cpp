@@ -1,4 +1,4 @@
-#include "uav_sim/geometric_controller.h"
+#include "topo_planner/uav_sim/geometric_controller.h"
 
 #include <Eigen/Dense>
 #include <cmath>

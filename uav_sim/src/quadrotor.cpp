@@ -1,4 +1,4 @@
-#include "uav_sim/quadrotor.h"
+#include "topo_planner/uav_sim/quadrotor.h"
 
 #include <cmath>
 #include <sstream>

@@ -1,4 +1,4 @@
-#include "uav_sim/truth_map.h"
+#include "topo_planner/uav_sim/truth_map.h"
 
 #include <algorithm>
 #include <chrono>

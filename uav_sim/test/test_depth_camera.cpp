@@ -7,9 +7,9 @@
 #include <random>
 #include <string>
 
-#include "plan_env/map_generator.h"
-#include "plan_env/synthetic_scene.h"
-#include "uav_sim/depth_camera.h"
+#include "topo_planner/plan_env/map_generator.h"
+#include "topo_planner/plan_env/synthetic_scene.h"
+#include "topo_planner/uav_sim/depth_camera.h"
 
 namespace topo_planner {
 

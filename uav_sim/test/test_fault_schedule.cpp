@@ -6,7 +6,7 @@
 #include <cmath>
 #include <random>
 
-#include "uav_sim/fault_schedule.h"
+#include "topo_planner/uav_sim/fault_schedule.h"
 
 namespace topo_planner {
 namespace {

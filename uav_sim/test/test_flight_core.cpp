@@ -4,7 +4,7 @@
 
 #include <cmath>
 
-#include "uav_sim/geometric_controller.h"
+#include "topo_planner/uav_sim/geometric_controller.h"
 
 namespace topo_planner {
 namespace {

@@ -5,8 +5,8 @@
 
 #include <cmath>
 
-#include "uav_sim/ros/conversions.h"
-#include "uav_sim/ros/truth_map.h"
+#include "topo_planner/uav_sim/ros/conversions.h"
+#include "topo_planner/uav_sim/ros/truth_map.h"
 
 namespace topo_planner {
 namespace {

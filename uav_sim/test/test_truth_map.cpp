@@ -5,8 +5,8 @@
 #include <cmath>
 #include <random>
 
-#include "plan_env/map_generator.h"
-#include "uav_sim/truth_map.h"
+#include "topo_planner/plan_env/map_generator.h"
+#include "topo_planner/uav_sim/truth_map.h"
 
 namespace topo_planner {
 namespace {

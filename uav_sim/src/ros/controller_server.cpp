@@ -1,4 +1,4 @@
-#include "uav_sim/ros/controller_server.h"
+#include "topo_planner/uav_sim/ros/controller_server.h"
 
 #include <topo_planner/RotorCommand.h>
 
@@ -6,8 +6,8 @@
 #include <cmath>
 #include <sstream>
 
-#include "uav_sim/ros/conversions.h"
-#include "uav_sim/ros/param_reader.h"
+#include "topo_planner/uav_sim/ros/conversions.h"
+#include "topo_planner/uav_sim/ros/param_reader.h"
 
 namespace topo_planner {
 

@@ -1,4 +1,4 @@
-#include "uav_sim/ros/conversions.h"
+#include "topo_planner/uav_sim/ros/conversions.h"
 
 #include <sensor_msgs/PointField.h>
 #include <sensor_msgs/point_cloud2_iterator.h>

@@ -1,7 +1,7 @@
 // The simulated depth camera: topics and parameters are documented in uav_sim/ros/depth_camera_server.h.
 #include <ros/ros.h>
 
-#include "uav_sim/ros/depth_camera_server.h"
+#include "topo_planner/uav_sim/ros/depth_camera_server.h"
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "depth_camera");

@@ -1,4 +1,4 @@
-#include "uav_sim/ros/depth_camera_server.h"
+#include "topo_planner/uav_sim/ros/depth_camera_server.h"
 
 #include <geometry_msgs/PoseStamped.h>
 #include <sensor_msgs/CameraInfo.h>
@@ -10,8 +10,8 @@
 #include <cstring>
 #include <sstream>
 
-#include "uav_sim/ros/conversions.h"
-#include "uav_sim/ros/param_reader.h"
+#include "topo_planner/uav_sim/ros/conversions.h"
+#include "topo_planner/uav_sim/ros/param_reader.h"
 
 namespace topo_planner {
 

@@ -1,7 +1,7 @@
 // The geometric tracking controller: topics and parameters are documented in uav_sim/ros/controller_server.h.
 #include <ros/ros.h>
 
-#include "uav_sim/ros/controller_server.h"
+#include "topo_planner/uav_sim/ros/controller_server.h"
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "geometric_controller");

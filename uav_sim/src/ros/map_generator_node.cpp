@@ -1,7 +1,7 @@
 // The simulation's true world: topics and parameters are documented in uav_sim/ros/map_generator_server.h.
 #include <ros/ros.h>
 
-#include "uav_sim/ros/map_generator_server.h"
+#include "topo_planner/uav_sim/ros/map_generator_server.h"
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "map_generator");

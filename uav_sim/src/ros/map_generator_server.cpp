@@ -1,4 +1,4 @@
-#include "uav_sim/ros/map_generator_server.h"
+#include "topo_planner/uav_sim/ros/map_generator_server.h"
 
 #include <sensor_msgs/PointCloud2.h>
 
@@ -7,9 +7,9 @@
 #include <map>
 #include <sstream>
 
-#include "plan_env/map_io.h"
-#include "uav_sim/ros/conversions.h"
-#include "uav_sim/ros/param_reader.h"
+#include "topo_planner/plan_env/map_io.h"
+#include "topo_planner/uav_sim/ros/conversions.h"
+#include "topo_planner/uav_sim/ros/param_reader.h"
 
 namespace topo_planner {
 

@@ -1,4 +1,4 @@
-#include "uav_sim/ros/quadrotor_sim.h"
+#include "topo_planner/uav_sim/ros/quadrotor_sim.h"
 
 #include <geometry_msgs/TransformStamped.h>
 #include <geometry_msgs/Vector3Stamped.h>
@@ -11,8 +11,8 @@
 #include <cstdio>
 #include <sstream>
 
-#include "uav_sim/ros/conversions.h"
-#include "uav_sim/ros/param_reader.h"
+#include "topo_planner/uav_sim/ros/conversions.h"
+#include "topo_planner/uav_sim/ros/param_reader.h"
 
 namespace topo_planner {
 

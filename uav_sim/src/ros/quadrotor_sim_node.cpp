@@ -1,7 +1,7 @@
 // The simulated quadrotor: topics and parameters are documented in uav_sim/ros/quadrotor_sim.h.
 #include <ros/ros.h>
 
-#include "uav_sim/ros/quadrotor_sim.h"
+#include "topo_planner/uav_sim/ros/quadrotor_sim.h"
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "quadrotor_sim");

@@ -1,10 +1,10 @@
-#include "uav_sim/ros/truth_map.h"
+#include "topo_planner/uav_sim/ros/truth_map.h"
 
 #include <algorithm>
 #include <cmath>
 #include <sstream>
 
-#include "uav_sim/ros/conversions.h"
+#include "topo_planner/uav_sim/ros/conversions.h"
 
 namespace topo_planner {
 

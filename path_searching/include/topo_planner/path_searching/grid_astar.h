@@ -1,0 +1,41 @@
+#pragma once
+// Grid A* (26-connected, Euclidean step costs and heuristic) on the map's voxels, free meaning
+// at least clearance_m from obstacles: the single guide path of the baselines and the fallback of
+// the replanner. Searches a box around start and goal; its buffers are kept between calls and
+// reset by a generation stamp, not reallocated.
+
+#include <cstdint>
+#include <vector>
+
+#include "topo_planner/path_searching/path.h"
+#include "topo_planner/path_searching/search_status.h"
+#include "topo_planner/path_searching/visibility.h"
+
+namespace topo_planner {
+
+class GridAStar {
+ public:
+  struct Config {
+    double clearance_m = 0.3;        ///< [m]
+    bool unknown_is_free = true;
+    double search_margin_m = 3.0;    ///< the search box is the start-goal box plus this on each side [m]
+    int max_expansions = 400000;     ///< budget
+  };
+  struct Result {
+    SearchStatus status = SearchStatus::kInvalidInput;
+    Path path;  ///< start, voxel centres, goal
+    int expansions = 0;
+  };
+
+  explicit GridAStar(const Config& config) : config_(config) {}
+  Result search(const EsdfMap& map, const Eigen::Vector3d& start, const Eigen::Vector3d& goal);
+
+ private:
+  Config config_;
+  std::vector<float> g_;
+  std::vector<int32_t> parent_;
+  std::vector<uint32_t> stamp_;
+  uint32_t generation_ = 0;
+};
+
+}  // namespace topo_planner

@@ -1,0 +1,117 @@
+#pragma once
+// PlannerServer: the ROS wrapper of the replanning FSM (topo_replan/replan_fsm.h), with the mapping
+// (MappingServer) in the same process so the planner reads the ESDF without copying it. The node
+// `planner_node` runs one; it is what runs on a real drone (with the trajectory server).
+//
+// Threads (each on its own callback queue and spinner thread, so none blocks another):
+//   mapping   the MappingServer's depth/pose/cloud callbacks and publishers (2 threads)
+//   planning  the FSM tick every plan_period_s: goals, horizon checks, replanning (holds the map's
+//             read lock while it plans, so a fusion waits at most one planning call)
+//   safety    the collision check of the executing trajectory every safety_period_s and the
+//             emergency stop
+//   main      odometry and goals
+//
+// Inputs are watched by the FSM (topo_replan/replan_fsm.h, "Input liveness"): odometry (stamp and
+// arrival; odometry in another frame than frame_id, or stamped before the last one, is ignored with a
+// throttled warning) and the mapping's last fused depth frame, passed to the FSM before every tick
+// and safety check. Stale inputs refuse goals, stop planning and brake a moving vehicle to a hover.
+//
+// Topics (private; remap them in the launch file)
+//   Subscribed  ~odometry        nav_msgs/Odometry (body pose; twist in the child frame unless
+//                                odom_twist_in_world)
+//               ~goal            geometry_msgs/PoseStamped (rviz 2D Nav Goal; placed at goal_height_m)
+//               ~waypoints       nav_msgs/Path (3-D goals, flown in order)
+//               ~position_cmd    topo_planner/PositionCommand, the trajectory server's setpoint: when
+//                                the server stops or holds on its own (watchdog, a refused
+//                                trajectory), the FSM plans from its hold (ReplanFsm, "The trajectory
+//                                server")
+//               ~mapping/...     the mapping topics (plan_manage/mapping_server.h)
+//   Published   ~bspline         topo_planner/Bspline, every trajectory the FSM returns (with this
+//                                process's random planner_session, so a restarted planner is accepted)
+//               ~heartbeat       topo_planner/PlannerHeartbeat at every safety check: session, state,
+//                                input freshness (the trajectory server stops the vehicle without it)
+//               ~replan_event    topo_planner/ReplanEvent, every planning call
+//               ~reference_path  nav_msgs/Path (latched), the global reference
+//               ~global_route    nav_msgs/Path (latched), the mission's global route (empty: none)
+//               ~vis/trajectory, ~vis/candidates, ~vis/guide_paths   visualization_msgs/MarkerArray
+//               ~vis/roadmap (guards, connectors, edges of the last search)  visualization_msgs/MarkerArray
+//
+// Parameters: see readPlannerParams() and config/planner.yaml.
+
+#include <nav_msgs/Odometry.h>
+#include <nav_msgs/Path.h>
+#include <geometry_msgs/PoseStamped.h>
+#include <ros/callback_queue.h>
+#include <ros/ros.h>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "topo_planner/plan_manage/mapping_server.h"
+#include "topo_planner/PositionCommand.h"
+#include "topo_planner/topo_replan/replan_fsm.h"
+
+namespace topo_planner {
+
+class PlannerServer {
+ public:
+  struct Config {
+    ReplanFsm::Config fsm;
+    MappingServer::Config mapping;
+    std::string frame_id = "world";     ///< world frame of odometry, goals and outputs
+    bool odom_twist_in_world = false;   ///< the odometry twist is in the world frame (some VIOs)
+    double goal_height_m = 1.0;         ///< height of rviz 2D Nav Goals [m]
+    double plan_period_s = 0.05;        ///< FSM tick period [s]
+    double safety_period_s = 0.05;      ///< safety check period [s]
+    std::vector<Eigen::Vector3d> goals; ///< a mission flown once odometry arrives (param goals_m)
+    double vis_sample_s = 0.05;         ///< time step of the trajectory markers [s]
+    /// Forget the map when the odometry jumps (the FSM holds, then replans in the space seen anew).
+    bool clear_map_on_odom_jump = true;
+  };
+
+  static std::unique_ptr<PlannerServer> create(const ros::NodeHandle& nh, const Config& config, std::string* error);
+  ~PlannerServer();
+
+ private:
+  PlannerServer(const ros::NodeHandle& nh, const Config& config);
+
+  void odomCallback(const nav_msgs::OdometryConstPtr& msg);
+  void positionCmdCallback(const PositionCommandConstPtr& msg);
+  void goalCallback(const geometry_msgs::PoseStampedConstPtr& msg);
+  void waypointsCallback(const nav_msgs::PathConstPtr& msg);
+  void submitGoals(const std::vector<Eigen::Vector3d>& goals, const char* source);
+  void planTimer(const ros::TimerEvent&);
+  void safetyTimer(const ros::TimerEvent&);
+  /// Publishes what a tick or a safety check returned.
+  void handle(const FsmOutput& out);
+  void publishReference();
+  void publishRoute();
+  void publishPlanMarkers(const ReplanResult& plan, const ExecTrajectory* chosen);
+  /// Passes the mapping's last fused depth frame to the FSM.
+  void feedDepth();
+  void publishHeartbeat(double now);
+
+  ros::NodeHandle nh_;
+  Config config_;
+  std::unique_ptr<ReplanFsm> fsm_;
+  ros::CallbackQueue mapping_queue_, planning_queue_, safety_queue_;
+  std::unique_ptr<MappingServer> mapping_;
+  std::unique_ptr<ros::AsyncSpinner> mapping_spinner_, planning_spinner_, safety_spinner_;
+
+  ros::Subscriber odom_sub_, goal_sub_, waypoints_sub_, position_cmd_sub_;
+  uint64_t session_ = 0;  // random per process: trajectory ordering survives a restart
+  ros::Publisher heartbeat_pub_;
+  int time_jumps_logged_ = 0;  // safety thread only
+  ros::Publisher route_pub_;
+  ros::Publisher bspline_pub_, event_pub_, reference_pub_, traj_vis_pub_, candidates_vis_pub_, guides_vis_pub_,
+      roadmap_vis_pub_;
+  ros::Timer plan_timer_, safety_timer_;
+  std::atomic<bool> initial_goals_sent_{false};  // goals_m accepted (retried every tick until then)
+};
+
+/// Reads the planner's parameters (and the mapping's, under ~mapping) with the struct defaults,
+/// validates them, and returns false after a ROS_ERROR saying what is wrong.
+bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config);
+
+}  // namespace topo_planner

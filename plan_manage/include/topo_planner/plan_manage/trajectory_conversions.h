@@ -1,0 +1,44 @@
+#pragma once
+// Conversions between the planner's core types and the closed loop's messages, in one place for the
+// planner node and the trajectory server.
+
+#include <ros/time.h>
+#include <visualization_msgs/Marker.h>
+
+#include <cstdint>
+#include <optional>
+#include <string>
+
+#include "topo_planner/Bspline.h"
+#include "topo_planner/PositionCommand.h"
+#include "topo_planner/topo_replan/replan_fsm.h"
+#include "topo_planner/topo_replan/setpoint_generator.h"
+
+namespace topo_planner {
+
+/// The message of a trajectory whose start_time_s is in ROS time seconds, from the planner process
+/// `planner_session` (a number drawn when it starts: ordering across restarts), with its heading
+/// target when it has one.
+Bspline toMsg(const ExecTrajectory& trajectory, const std::string& frame_id, uint64_t planner_session);
+
+/// What the trajectory server takes from a Bspline message.
+struct ReceivedTrajectory {
+  uint64_t planner_session = 0;
+  int64_t id = -1;
+  double start_time_s = 0.0;  ///< [s, ROS time]
+  UniformBspline spline;
+  std::optional<Eigen::Vector3d> heading_target;  ///< set when has_heading_target [m, world]
+  bool reanchor = false;                          ///< deliberately starts away from the setpoint
+};
+/// The content of a message; false (with a reason) for an invalid one (too few or non-finite
+/// control points, bad degree or knot span, a non-finite heading target).
+bool fromMsg(const Bspline& msg, ReceivedTrajectory* out, std::string* why);
+
+PositionCommand toMsg(const Setpoint& setpoint, const ros::Time& stamp, const std::string& frame_id);
+
+/// A LINE_STRIP of the spline sampled every dt_s.
+visualization_msgs::Marker lineStrip(const UniformBspline& spline, double dt_s, const std::string& frame_id,
+                                     const std::string& ns, int id, double width_m, float r, float g, float b,
+                                     float a = 1.0f);
+
+}  // namespace topo_planner
