@@ -44,7 +44,7 @@ run_case() {  # name, then the build commands (run in a clean environment in the
     source '$ws/devel/setup.bash' &&
     rosrun topo_planner flight_world --style windows --density medium --seed 1 --goals 2 --out '$ws/world.bt' &&
     rosrun fast_planner_names traj_server &&
-    rosrun topo_planner plan_manage_test_setpoint_messages" 2>>"$log")
+    rosrun topo_planner topo_planner_plan_manage_test_setpoint_messages" 2>>"$log")
   if ! grep -q '^GOALS ' <<<"$out" || [ ! -s "$ws/world.bt" ]; then
     status[$name]=fail
     message[$name]="topo_planner's flight_world did not run (log: $log)"
