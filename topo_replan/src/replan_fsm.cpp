@@ -657,9 +657,7 @@ bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const 
     const Eigen::Vector3d p = plan.evaluate(tau);
     const double s = arc.empty() ? 0.0 : arc.back() + (p - prev).norm();
     prev = p;
-    // (Not the start: the vehicle is there already; e.g. beside space that became unknown when the
-    // window scrolled, it stops or moves on instead of failing every plan.)
-    if (tau > 0.0 && !committable(map, p)) {
+    if (!committable(map, p)) {
       blocked_s = s;
       break;
     }
@@ -685,6 +683,8 @@ bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const 
     while (kb + 1 < taus.size() && speed[kb + 1] * speed[kb + 1] / (2.0 * a) + margin <= blocked_s - arc[kb + 1]) ++kb;
     double a_stop = a;
     const double room = blocked_s - arc[kb] - margin;
+    // A wider margin is no reason to brake harder than planned: only the first may need that.
+    if (margin > config_.commit_margin_m && speed[kb] * speed[kb] / (2.0 * a) > room) break;
     if (speed[kb] * speed[kb] / (2.0 * a) > room) {
       // Even now it cannot stop before unknown space at the planning limit (the map shrank or the
       // start is already too close): stop as hard as the vehicle allows.
@@ -722,7 +722,7 @@ bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const 
     const double D = traj->spline.duration();
     cut = true;
     for (double tau = 0.0;; tau = std::min(D, tau + dt)) {
-      if (tau > 0.0 && !committable(map, traj->spline.evaluate(tau))) {
+      if (!committable(map, traj->spline.evaluate(tau))) {
         *why = "known-space commitment: the cut trajectory leaves the known free space " + std::to_string(tau) +
                " s after its start";
         cut = false;
