@@ -657,9 +657,9 @@ bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const 
     const Eigen::Vector3d p = plan.evaluate(tau);
     const double s = arc.empty() ? 0.0 : arc.back() + (p - prev).norm();
     prev = p;
-    // (Not the start: the vehicle is there already. After an odometry jump, or beside space that
-    // became unknown when the window scrolled, it stops or moves on instead of failing every plan.)
-    if (tau > 0.0 && !committable(map, p)) {
+    // (Not where the vehicle is: the start, and a hold there. After an odometry jump, or beside space
+    // that became unknown when the window scrolled, it holds and looks instead of failing every plan.)
+    if ((p - start).norm() > 1e-6 && !committable(map, p)) {
       blocked_s = s;
       break;
     }
@@ -724,7 +724,8 @@ bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const 
     const double D = traj->spline.duration();
     cut = true;
     for (double tau = 0.0;; tau = std::min(D, tau + dt)) {
-      if (tau > 0.0 && !committable(map, traj->spline.evaluate(tau))) {
+      const Eigen::Vector3d q = traj->spline.evaluate(tau);
+      if ((q - start).norm() > 1e-6 && !committable(map, q)) {
         *why = "known-space commitment: the cut trajectory leaves the known free space " + std::to_string(tau) +
                " s after its start";
         cut = false;
