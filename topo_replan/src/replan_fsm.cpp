@@ -43,30 +43,75 @@ class PathByLength {
   Eigen::Vector3d direction_ = Eigen::Vector3d::Zero();
 };
 
-// A stop from speed v: deceleration a, easing to 0 over the last kStopRamp seconds (a linear ramp),
-// so the spline fitted to it (which ends with zero acceleration) need not overshoot a to get there.
-// The ramp lengthens the stop by a kStopRamp^2 / 24 (4 mm at 2.5 m/s^2).
-struct StopProfile {
-  static constexpr double kStopRamp = 0.2;  // [s]
-  double v = 0.0, a = 1.0, ramp = 0.0, t1 = 0.0, v_r = 0.0;
-  StopProfile(double speed, double decel) : v(std::max(0.0, speed)), a(decel) {
-    ramp = std::min(kStopRamp, 2.0 * v / a);  // a slow vehicle ramps down all the way
-    v_r = 0.5 * a * ramp;                      // speed when the ramp starts
-    t1 = (v - v_r) / a;
+// A stop from speed v along a path: the acceleration along it goes from its present value a0 to the
+// deceleration a within kOnsetRamp seconds per a (a linear ramp), holds a, and eases back to 0 over
+// the last kStopRamp seconds, so that the cubic spline fitted to it (which starts with the flown
+// acceleration and ends with none) need not overshoot a anywhere. A stop that began at full
+// deceleration however the vehicle accelerated (the earlier profile) made the fit ring: 4-5 m/s^2
+// commanded for a 2.5 m/s^2 brake, 6-8 m/s^2 for a harder one. Integrated numerically (2 ms steps).
+class StopProfile {
+ public:
+  static constexpr double kOnsetRamp = 0.1;  // [s per a] from no acceleration to full deceleration
+  static constexpr double kStopRamp = 0.2;   // [s] from full deceleration to none, at the end
+  static constexpr double kStep = 0.002;     // [s]
+  StopProfile(double speed, double decel, double start_acc) {
+    s_.push_back(0.0);
+    double v = std::isfinite(speed) ? std::max(0.0, speed) : 0.0;
+    if (v <= 1e-6) return;
+    const double a = std::isfinite(decel) && decel > 1e-3 ? decel : 1e-3;
+    const double j_on = a / kOnsetRamp, j_off = a / kStopRamp;
+    double acc = std::isfinite(start_acc) ? std::clamp(start_acc, -4.0 * a, 4.0 * a) : -a;
+    double dist = 0.0;
+    bool easing = false;
+    for (int k = 0; k < 1000000; ++k) {
+      // Ease off once the speed left is what the ramp from this deceleration to none takes away.
+      if (acc < 0.0 && v <= acc * acc / (2.0 * j_off)) easing = true;
+      double next;
+      if (easing) next = std::min(0.0, acc + j_off * kStep);
+      else if (acc > -a) next = std::max(-a, acc - j_on * kStep);
+      else next = std::min(-a, acc + j_on * kStep);
+      const double v_next = v + 0.5 * (acc + next) * kStep;
+      if (v_next <= 0.0 || (easing && next >= 0.0)) {
+        // At rest within this step (the speed falls about linearly over it).
+        const double f = v_next < 0.0 ? v / (v - v_next) : 1.0;
+        s_.push_back(dist + 0.5 * v * f * kStep + (v_next > 0.0 ? 0.5 * v_next * kStep : 0.0));
+        end_fraction_ = f;
+        return;
+      }
+      dist += 0.5 * (v + v_next) * kStep;
+      v = v_next;
+      acc = next;
+      s_.push_back(dist);
+    }
   }
-  double duration() const { return t1 + ramp; }
+  double duration() const { return s_.size() <= 1 ? 0.0 : (double(s_.size()) - 2.0 + end_fraction_) * kStep; }
+  double length() const { return s_.back(); }
   double distance(double tau) const {
-    tau = std::clamp(tau, 0.0, duration());
-    if (tau <= t1) return v * tau - 0.5 * a * tau * tau;
-    const double u = tau - t1, s1 = v * t1 - 0.5 * a * t1 * t1;
-    return s1 + v_r * u - a * (0.5 * u * u - u * u * u / (6.0 * ramp));
+    if (!(tau > 0.0) || s_.size() <= 1) return 0.0;
+    if (tau >= duration()) return s_.back();
+    const double x = tau / kStep;
+    const size_t i = std::min(s_.size() - 2, size_t(x));
+    const double span = i + 2 == s_.size() ? end_fraction_ : 1.0;
+    const double f = span > 0.0 ? std::clamp((x - double(i)) / span, 0.0, 1.0) : 1.0;
+    return s_[i] + f * (s_[i + 1] - s_[i]);
   }
+
+ private:
+  std::vector<double> s_;  // distance every kStep from the start; the last step may be a fraction
+  double end_fraction_ = 1.0;
 };
+
+// The acceleration of `a` along the unit direction of `v` (0 at rest).
+double alongAcceleration(const Eigen::Vector3d& v, const Eigen::Vector3d& a) {
+  const double speed = v.norm();
+  return speed > 1e-6 ? a.dot(v) / speed : 0.0;
+}
 
 // Positions every `interval` of a stop from speed v along `path` (from arc length s0) at
 // deceleration a (StopProfile).
-std::vector<Eigen::Vector3d> stopPoints(const PathByLength& path, double s0, double v, double a, double* interval) {
-  const StopProfile stop(v, a);
+std::vector<Eigen::Vector3d> stopPoints(const PathByLength& path, double s0, double v, double a, double a0,
+                                        double* interval) {
+  const StopProfile stop(v, a, a0);
   const double T = stop.duration();
   const int n = std::max(4, int(std::ceil(T / 0.05)));
   *interval = T > 0.0 ? T / n : 0.1;
@@ -578,16 +623,18 @@ ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::s
     if (speed < 0.05) {
       points.assign(4, s0.position);
     } else if (path) {
-      points = stopPoints(*path, 0.0, speed, a, &interval);
+      // From the flown acceleration (the curve's included): no step in the commanded acceleration.
+      points = stopPoints(*path, 0.0, speed, a, alongAcceleration(s0.velocity, s0.acceleration), &interval);
       points.front() = s0.position;
-      start_acc = -a * s0.velocity / speed;
+      start_acc = s0.acceleration;
     } else {
       const Eigen::Vector3d u = s0.velocity / speed;
-      const StopProfile stop(speed, a);
+      const double a0 = alongAcceleration(s0.velocity, s0.acceleration);
+      const StopProfile stop(speed, a, a0);
       const int n = std::max(4, int(std::ceil(stop.duration() / 0.05)));
       interval = stop.duration() / n;
       for (int k = 0; k <= n; ++k) points.push_back(s0.position + u * stop.distance(k * interval));
-      start_acc = -a * u;  // the profile starts at full deceleration (also when it is all ramp)
+      start_acc = a0 * u;  // along the line of the stop
     }
     ExecTrajectory brake;
     brake.start_time_s = t;
@@ -650,7 +697,8 @@ bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const 
   const double T = plan.duration(), dt = config_.safety_sample_s;
   const UniformBspline vel = plan.derivative();
   const Eigen::Vector3d start = plan.evaluate(0.0);
-  std::vector<double> taus, arc, speed;
+  const UniformBspline acc = vel.derivative();
+  std::vector<double> taus, arc, speed, along;  // along: the acceleration along the path
   double blocked_s = -1.0;
   Eigen::Vector3d prev = start;
   for (double tau = 0.0;; tau = std::min(T, tau + dt)) {
@@ -665,7 +713,9 @@ bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const 
     }
     taus.push_back(tau);
     arc.push_back(s);
-    speed.push_back(tau >= T ? 0.0 : vel.evaluate(tau).norm());
+    const Eigen::Vector3d v_tau = vel.evaluate(tau);
+    speed.push_back(tau >= T ? 0.0 : v_tau.norm());
+    along.push_back(tau >= T ? 0.0 : alongAcceleration(v_tau, acc.evaluate(tau)));
     if (tau >= T) break;
   }
   if (blocked_s < 0.0) return true;  // all of it is known free: flown as planned
@@ -676,34 +726,35 @@ bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const 
   // ends: where that leaves the known free space (a path that runs along its edge), the stop is cut
   // again with a wider margin.
   const double a = config_.brake_acc_mps2;
-  const UniformBspline acc = vel.derivative();
   const Eigen::Vector3d v0 = vel.evaluate(0.0), a0 = acc.evaluate(0.0);
   double tau_b = 0.0;
   bool cut = false;
   for (const double margin : {config_.commit_margin_m, config_.commit_margin_m + 0.15, config_.commit_margin_m + 0.4}) {
+    auto stopLength = [&](size_t k, double decel) { return StopProfile(speed[k], decel, along[k]).length(); };
     size_t kb = 0;
-    while (kb + 1 < taus.size() && speed[kb + 1] * speed[kb + 1] / (2.0 * a) + margin <= blocked_s - arc[kb + 1]) ++kb;
+    while (kb + 1 < taus.size() && stopLength(kb + 1, a) + margin <= blocked_s - arc[kb + 1]) ++kb;
     double a_stop = a;
     const double room = blocked_s - arc[kb] - margin;
     // A wider margin is no reason to brake harder than planned: only the first may need that.
-    if (margin > config_.commit_margin_m && speed[kb] * speed[kb] / (2.0 * a) > room) break;
-    if (speed[kb] * speed[kb] / (2.0 * a) > room) {
-      // Even now it cannot stop before unknown space at the planning limit (the map shrank or the
-      // start is already too close): stop as hard as the vehicle allows.
-      a_stop = std::min(config_.max_brake_acc_mps2, speed[kb] * speed[kb] / (2.0 * std::max(room, 1e-3)));
-    }
+    if (margin > config_.commit_margin_m && stopLength(kb, a) > room) break;
+    // Even now it cannot stop before unknown space at the planning limit (the map shrank or the
+    // start is already too close): stop harder, as hard as the vehicle allows.
+    while (a_stop < config_.max_brake_acc_mps2 && stopLength(kb, a_stop) > room)
+      a_stop = std::min(config_.max_brake_acc_mps2, 1.15 * a_stop);
     // Flown as planned to tau_b, then a stop along the same path, refitted as one spline.
     tau_b = taus[kb];
     const double v_b = speed[kb];
-    const StopProfile stop(v_b, a_stop);
+    const StopProfile stop(v_b, a_stop, along[kb]);
     const double T_stop = v_b > 1e-3 ? stop.duration() : 0.0, T_total = tau_b + T_stop;
     const PathByLength path(plan, tau_b, 0.01);
-    if (T_total < 0.05 && v0.norm() < 0.05) {
+    if (T_total < 0.05 && v0.norm() < 0.05 && a0.norm() < 0.5) {
       // At rest at the edge of the known space: hold, and look where the plan goes.
       traj->spline = UniformBspline::straightLine(start, start, 6, 3, 0.1);
     } else {
-      const int n = std::max(6, int(std::ceil(T_total / 0.05)));
-      const double h = T_total / n;
+      // (At least 0.2 s: the end of a stop still decelerating eases to rest instead of a step to a hold.)
+      const double T_fit = std::max(T_total, 0.2);
+      const int n = std::max(6, int(std::ceil(T_fit / 0.05)));
+      const double h = T_fit / n;
       std::vector<Eigen::Vector3d> points;
       for (int k = 0; k <= n; ++k) {
         const double tau = k * h;
