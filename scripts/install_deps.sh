@@ -14,6 +14,7 @@ PACKAGES=(
   python3-geometry-msgs python3-nav-msgs python3-sensor-msgs  # rostest nodes in Python (planner_inputs_test.py)
   libstd-msgs-dev libgeometry-msgs-dev libsensor-msgs-dev libnav-msgs-dev libvisualization-msgs-dev
   libtf2-ros-dev libtf2-eigen-dev libtf2-geometry-msgs-dev libpcl-conversions-dev libcv-bridge-dev
+  libdiagnostic-updater-dev libdiagnostic-msgs-dev  # /diagnostics of the mapping and the planner
   rviz
   # algorithms and maps
   libeigen3-dev libnlopt-cxx-dev liboctomap-dev libdynamicedt3d-dev libpcl-dev libopencv-dev

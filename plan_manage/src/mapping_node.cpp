@@ -1,4 +1,5 @@
 // Occupancy + ESDF mapping node: topics and parameters are documented in plan_manage/mapping_server.h.
+#include <diagnostic_updater/diagnostic_updater.h>
 #include <ros/ros.h>
 
 #include "topo_planner/plan_manage/mapping_server.h"
@@ -14,6 +15,13 @@ int main(int argc, char** argv) {
     ROS_ERROR("mapping: cannot start: %s", error.c_str());
     return 1;
   }
+  // /diagnostics: "<node>: mapping" (plan_manage/health.h), at ~diagnostic_period (1 s by default).
+  diagnostic_updater::Updater updater;
+  updater.setHardwareID("topo_planner");
+  updater.add("mapping", [&](diagnostic_updater::DiagnosticStatusWrapper& status) {
+    topo_planner::healthToStatus(server->health(ros::Time::now().toSec()), &status);
+  });
+  const ros::Timer diagnostics_timer = nh.createTimer(ros::Duration(0.1), [&](const ros::TimerEvent&) { updater.update(); });
   // Two threads: fusion and publishing overlap (MappingServer's locking rule makes that safe).
   ros::AsyncSpinner spinner(2);
   spinner.start();

@@ -309,6 +309,19 @@ MappingServer::Stats MappingServer::stats() const {
   return s;
 }
 
+HealthReport MappingServer::health(double now) {
+  const Stats s = stats();
+  MappingHealth::Inputs in;
+  in.frames_fused = s.frames_fused;
+  in.frames_refused = s.frames_refused;
+  in.depth_stamp_s = s.depth_stamp_s;
+  in.depth_arrival_s = s.depth_arrival_s;
+  in.pose_arrival_s = s.pose_arrival_s;
+  in.last_fusion_ms = s.last_fusion_ms;
+  in.last_esdf_ms = s.last_esdf_ms;
+  return health_.report(now, in);
+}
+
 void MappingServer::clearMap(const std::string& why) {
   {
     std::unique_lock<std::shared_mutex> lock(map_mutex_);

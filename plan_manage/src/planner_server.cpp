@@ -49,6 +49,23 @@ std::unique_ptr<PlannerServer> PlannerServer::create(const ros::NodeHandle& nh, 
   safety_nh.setCallbackQueue(&s.safety_queue_);
   s.plan_timer_ = plan_nh.createTimer(ros::Duration(config.plan_period_s), &PlannerServer::planTimer, &s);
   s.safety_timer_ = safety_nh.createTimer(ros::Duration(config.safety_period_s), &PlannerServer::safetyTimer, &s);
+  s.diagnostics_.reset(new diagnostic_updater::Updater(ros::NodeHandle(), pnh));
+  s.diagnostics_->setHardwareID("topo_planner");
+  s.diagnostics_->add("planner", [&s](diagnostic_updater::DiagnosticStatusWrapper& status) {
+    const double now = ros::Time::now().toSec();
+    const InputHealth inputs = s.fsm_->inputHealth(now);
+    PlannerHealth::Inputs in;
+    in.state = toString(s.fsm_->state());
+    in.have_odometry = s.fsm_->state() != FsmState::kInit;
+    in.inputs_ok = inputs.ok;
+    in.inputs_why = inputs.why;
+    in.odom_age_s = inputs.odom_age_s;
+    in.depth_age_s = inputs.depth_age_s;
+    healthToStatus(s.health_.report(now, in), &status);
+  });
+  s.diagnostics_->add("mapping", [&s](diagnostic_updater::DiagnosticStatusWrapper& status) {
+    healthToStatus(s.mapping_->health(ros::Time::now().toSec()), &status);
+  });
   s.mapping_spinner_.reset(new ros::AsyncSpinner(2, &s.mapping_queue_));
   s.planning_spinner_.reset(new ros::AsyncSpinner(1, &s.planning_queue_));
   s.safety_spinner_.reset(new ros::AsyncSpinner(1, &s.safety_queue_));
@@ -206,6 +223,7 @@ void PlannerServer::safetyTimer(const ros::TimerEvent&) {
   // stops the vehicle along its path (what it flies is no longer checked here), then the FSM plans
   // from its hold.
   if (!out.server_diverged) publishHeartbeat(now);
+  diagnostics_->update();  // publishes at its own period
   const int jumps = fsm_->timeJumps();
   if (jumps != time_jumps_logged_) {
     ROS_WARN("planner: ROS time jumped (%d so far): timing shifted, replanning from the current state", jumps);
@@ -220,6 +238,10 @@ void PlannerServer::handle(const FsmOutput& out) {
   if (out.trajectory) bspline_pub_.publish(toMsg(*out.trajectory, config_.frame_id, session_));
   if (out.event) {
     const FsmEvent& e = *out.event;
+    const double now = ros::Time::now().toSec();
+    if (e.trigger == FsmEvent::Trigger::kEmergency) health_.addEmergencyStop(now);
+    else health_.addPlanningCall(now, e.published, e.stats.total_ms);
+    if (e.fallback == "give_up") health_.addGiveUp(now, e.message);
     ReplanEvent msg;
     msg.header.stamp = ros::Time::now();
     msg.header.frame_id = config_.frame_id;

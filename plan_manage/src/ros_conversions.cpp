@@ -196,4 +196,13 @@ void pointsToPointCloud2(const std::vector<Eigen::Vector3d>& points, const std::
   }
 }
 
+void healthToStatus(const HealthReport& report, diagnostic_updater::DiagnosticStatusWrapper* status) {
+  using diagnostic_msgs::DiagnosticStatus;
+  const unsigned char level = report.level == HealthLevel::kOk     ? DiagnosticStatus::OK
+                              : report.level == HealthLevel::kWarn ? DiagnosticStatus::WARN
+                                                                   : DiagnosticStatus::ERROR;
+  status->summary(level, report.message);
+  for (const auto& kv : report.values) status->add(kv.first, kv.second);
+}
+
 }  // namespace topo_planner

@@ -3,9 +3,13 @@
 // every goal was reached without a collision. The wall-clock wait is a guard against a hung
 // simulation (a result that never comes), not a performance budget.
 
+#include <diagnostic_msgs/DiagnosticArray.h>
 #include <gtest/gtest.h>
 #include <ros/ros.h>
 #include <topo_planner/FlightResult.h>
+
+#include <map>
+#include <string>
 
 namespace {
 
@@ -19,6 +23,19 @@ TEST(ClosedLoop, ReachesEveryGoalWithoutCollision) {
   topo_planner::FlightResultConstPtr result;
   ros::Subscriber sub = nh.subscribe<topo_planner::FlightResult>(
       "/flight_monitor/result", 1, [&](const topo_planner::FlightResultConstPtr& msg) { result = msg; });
+  // The planner's /diagnostics while it flies (plan_manage/health.h): the worst level of each task
+  // and its last values.
+  std::map<std::string, diagnostic_msgs::DiagnosticStatus> last;
+  std::map<std::string, int> worst;
+  ros::Subscriber diag_sub = nh.subscribe<diagnostic_msgs::DiagnosticArray>(
+      "/diagnostics", 20, [&](const diagnostic_msgs::DiagnosticArrayConstPtr& msg) {
+        for (const auto& st : msg->status) {
+          const std::string task = st.name.substr(st.name.rfind(' ') + 1);
+          if (st.hardware_id != "topo_planner" || (task != "planner" && task != "mapping")) continue;
+          last[task] = st;
+          worst[task] = std::max(worst.count(task) ? worst[task] : 0, int(st.level));
+        }
+      });
   const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(wall_timeout_s);
   while (!result && ros::ok() && ros::WallTime::now() < deadline) {
     ros::spinOnce();
@@ -38,6 +55,15 @@ TEST(ClosedLoop, ReachesEveryGoalWithoutCollision) {
   EXPECT_EQ(result->collisions, 0u) << result->message;
   EXPECT_GT(result->min_clearance_m, 0.0);
   EXPECT_GT(result->replans, 0u);
+
+  // Both tasks reported; a flight without faults never had stale inputs (ERROR) after its start.
+  ros::spinOnce();
+  ASSERT_TRUE(last.count("planner") && last.count("mapping")) << "no planner or mapping status on /diagnostics";
+  EXPECT_LT(worst["planner"], int(diagnostic_msgs::DiagnosticStatus::ERROR)) << last["planner"].message;
+  std::string calls;
+  for (const auto& kv : last["planner"].values)
+    if (kv.key == "planning calls total") calls = kv.value;
+  EXPECT_GT(std::stoi(calls.empty() ? "0" : calls), 0);
 }
 
 }  // namespace

@@ -14,6 +14,7 @@
 // Waiting is bounded by iteration counts (kMaxIterations x kStep, generous); the node runs its
 // publish timers at 5 Hz, so a passing case takes about a second.
 
+#include <diagnostic_msgs/DiagnosticArray.h>
 #include <geometry_msgs/PoseStamped.h>
 #include <gtest/gtest.h>
 #include <nav_msgs/Odometry.h>
@@ -408,6 +409,26 @@ TEST(MappingNode, BadInputIsRefusedAndTheNodeKeepsRunning) {
                         [&](int) { t.sendDepthWithPose(image, good_pose); }));
   expectWall(t.occupancy_);
   EXPECT_TRUE(nodeAlive("/mapping_bad"));
+
+  // /diagnostics counts what was refused and fused (plan_manage/health.h).
+  ros::NodeHandle nh;
+  diagnostic_msgs::DiagnosticStatus status;
+  bool have_status = false;
+  const ros::Subscriber diag_sub = nh.subscribe<diagnostic_msgs::DiagnosticArray>(
+      "/diagnostics", 10, [&](const diagnostic_msgs::DiagnosticArrayConstPtr& msg) {
+        for (const auto& st : msg->status)
+          if (st.name.find("mapping_bad: mapping") != std::string::npos) status = st, have_status = true;
+      });
+  auto value = [&](const std::string& key) {
+    for (const auto& kv : status.values)
+      if (kv.key == key) return kv.value;
+    return std::string();
+  };
+  ASSERT_TRUE(spinUntil([&] { return have_status && value("depth frames fused") != "0"; })) << "no mapping status on /diagnostics";
+  EXPECT_EQ(status.hardware_id, "topo_planner");
+  EXPECT_GT(std::stoi(value("depth frames refused")), 10) << status.message;
+  EXPECT_GT(std::stoi(value("depth frames fused")), 0);
+  EXPECT_FALSE(value("fusion rate [Hz]").empty());
 }
 
 TEST(MappingNode, OdometryWithExtrinsic) {

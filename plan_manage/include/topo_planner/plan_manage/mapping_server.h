@@ -86,6 +86,7 @@
 #include "topo_planner/plan_env/depth_image.h"
 #include "topo_planner/plan_env/esdf_map.h"
 #include "topo_planner/plan_env/occupancy_map.h"
+#include "topo_planner/plan_manage/health.h"
 #include "topo_planner/plan_manage/ros_conversions.h"
 #include "topo_planner/plan_manage/stamp_guard.h"
 
@@ -157,6 +158,8 @@ class MappingServer {
 
   const Config& config() const { return config_; }
   Stats stats() const;
+  /// The mapping's health at ROS time `now` for /diagnostics (plan_manage/health.h).
+  HealthReport health(double now);
 
   /// Forgets the map (every voxel unknown), e.g. after the odometry jumped: what was mapped in the
   /// old frame would sit in the wrong place in the new one.
@@ -194,6 +197,7 @@ class MappingServer {
 
   ros::NodeHandle nh_;
   Config config_;
+  MappingHealth health_;  // thread-safe
 
   mutable std::shared_mutex map_mutex_;
   std::shared_ptr<OccupancyMap> occupancy_;  // written under map_mutex_

@@ -35,9 +35,12 @@
 //               ~global_route    nav_msgs/Path (latched), the mission's global route (empty: none)
 //               ~vis/trajectory, ~vis/candidates, ~vis/guide_paths   visualization_msgs/MarkerArray
 //               ~vis/roadmap (guards, connectors, edges of the last search)  visualization_msgs/MarkerArray
+//               /diagnostics diagnostic_msgs/DiagnosticArray, "<node>: planner" and "<node>: mapping"
+//                            at ~diagnostic_period (1 s by default): plan_manage/health.h
 //
 // Parameters: see readPlannerParams() and config/planner.yaml.
 
+#include <diagnostic_updater/diagnostic_updater.h>
 #include <nav_msgs/Odometry.h>
 #include <nav_msgs/Path.h>
 #include <geometry_msgs/PoseStamped.h>
@@ -48,6 +51,7 @@
 #include <string>
 #include <vector>
 
+#include "topo_planner/plan_manage/health.h"
 #include "topo_planner/plan_manage/mapping_server.h"
 #include "topo_planner/PositionCommand.h"
 #include "topo_planner/topo_replan/replan_fsm.h"
@@ -107,6 +111,8 @@ class PlannerServer {
   ros::Publisher bspline_pub_, event_pub_, reference_pub_, traj_vis_pub_, candidates_vis_pub_, guides_vis_pub_,
       roadmap_vis_pub_;
   ros::Timer plan_timer_, safety_timer_;
+  PlannerHealth health_;                                  // thread-safe
+  std::unique_ptr<diagnostic_updater::Updater> diagnostics_;  // updated by the safety thread
   std::atomic<bool> initial_goals_sent_{false};  // goals_m accepted (retried every tick until then)
 };
 

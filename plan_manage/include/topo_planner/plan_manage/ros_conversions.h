@@ -4,6 +4,7 @@
 // wrong with it in a status value; none of them throws or asserts on message content.
 
 #include <Eigen/Geometry>
+#include <diagnostic_updater/DiagnosticStatusWrapper.h>
 #include <geometry_msgs/Pose.h>
 #include <ros/time.h>
 #include <sensor_msgs/Image.h>
@@ -14,6 +15,7 @@
 #include <vector>
 
 #include "topo_planner/plan_env/depth_image.h"
+#include "topo_planner/plan_manage/health.h"
 
 namespace topo_planner {
 
@@ -58,5 +60,8 @@ void pointsToPointCloud2(const std::vector<Eigen::Vector3d>& points, const std::
 /// As pointsToPointCloud2 with a FLOAT32 `intensity` field; intensities.size() == points.size().
 void pointsToPointCloud2(const std::vector<Eigen::Vector3d>& points, const std::vector<float>& intensities,
                          const std::string& frame_id, const ros::Time& stamp, sensor_msgs::PointCloud2* msg);
+
+/// A health report (plan_manage/health.h) as a diagnostic status: level, message and values.
+void healthToStatus(const HealthReport& report, diagnostic_updater::DiagnosticStatusWrapper* status);
 
 }  // namespace topo_planner
