@@ -15,6 +15,7 @@ PACKAGES=(
   libstd-msgs-dev libgeometry-msgs-dev libsensor-msgs-dev libnav-msgs-dev libvisualization-msgs-dev
   libtf2-ros-dev libtf2-eigen-dev libtf2-geometry-msgs-dev libpcl-conversions-dev libcv-bridge-dev
   libdiagnostic-updater-dev libdiagnostic-msgs-dev  # /diagnostics of the mapping and the planner
+  libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure  # the planner's limits at run time
   rviz
   # algorithms and maps
   libeigen3-dev libnlopt-cxx-dev liboctomap-dev libdynamicedt3d-dev libpcl-dev libopencv-dev

@@ -66,6 +66,11 @@ std::unique_ptr<PlannerServer> PlannerServer::create(const ros::NodeHandle& nh, 
   s.diagnostics_->add("mapping", [&s](diagnostic_updater::DiagnosticStatusWrapper& status) {
     healthToStatus(s.mapping_->health(ros::Time::now().toSec()), &status);
   });
+  // Flight limits and clearances at run time, starting from the loaded values (main thread).
+  s.requested_ = config.fsm;
+  s.reconfigure_.reset(new dynamic_reconfigure::Server<PlannerConfig>(s.reconfigure_mutex_, ros::NodeHandle(pnh, "limits")));
+  s.reconfigure_->updateConfig(limitsOf(config.fsm));
+  s.reconfigure_->setCallback([&s](PlannerConfig& limits, uint32_t level) { s.reconfigureCallback(limits, level); });
   s.mapping_spinner_.reset(new ros::AsyncSpinner(2, &s.mapping_queue_));
   s.planning_spinner_.reset(new ros::AsyncSpinner(1, &s.planning_queue_));
   s.safety_spinner_.reset(new ros::AsyncSpinner(1, &s.safety_queue_));
@@ -229,6 +234,47 @@ void PlannerServer::safetyTimer(const ros::TimerEvent&) {
     ROS_WARN("planner: ROS time jumped (%d so far): timing shifted, replanning from the current state", jumps);
     time_jumps_logged_ = jumps;
   }
+}
+
+PlannerConfig PlannerServer::limitsOf(const ReplanFsm::Config& f) {
+  PlannerConfig c;
+  c.max_vel_mps = f.replanner.optimizer.max_vel_mps;
+  c.max_acc_mps2 = f.replanner.optimizer.max_acc_mps2;
+  c.brake_acc_mps2 = f.brake_acc_mps2;
+  c.safety_clearance_m = f.safety_clearance_m;
+  c.search_clearance_m = f.replanner.search.clearance_m;
+  c.optimizer_clearance_m = f.replanner.optimizer.clearance_m;
+  return c;
+}
+
+void PlannerServer::reconfigureCallback(PlannerConfig& limits, uint32_t) {
+  ReplanFsm::Config next = requested_;
+  TopoReplanner::Config& p = next.replanner;
+  p.optimizer.max_vel_mps = limits.max_vel_mps;
+  p.optimizer.max_acc_mps2 = limits.max_acc_mps2;
+  next.reference.max_vel_mps = config_.reference_speed_ratio * limits.max_vel_mps;
+  next.reference.max_acc_mps2 = config_.reference_speed_ratio * limits.max_acc_mps2;
+  next.brake_acc_mps2 = limits.brake_acc_mps2;
+  next.safety_clearance_m = limits.safety_clearance_m;
+  if (requested_.route.clearance_m == requested_.replanner.search.clearance_m) next.route.clearance_m = limits.search_clearance_m;
+  p.search.clearance_m = p.astar.clearance_m = limits.search_clearance_m;
+  p.optimizer.clearance_m = limits.optimizer_clearance_m;
+  const PlannerConfig before = limitsOf(requested_), after = limitsOf(next);
+  if (before.max_vel_mps == after.max_vel_mps && before.max_acc_mps2 == after.max_acc_mps2 &&
+      before.brake_acc_mps2 == after.brake_acc_mps2 && before.safety_clearance_m == after.safety_clearance_m &&
+      before.search_clearance_m == after.search_clearance_m && before.optimizer_clearance_m == after.optimizer_clearance_m)
+    return;  // nothing changed (the server's first call)
+  std::string why;
+  if (!fsm_->reconfigure(next, &why)) {
+    ROS_WARN("planner: reconfigure refused, the limits in use are kept: %s", why.c_str());
+    limits = before;  // what the server reports back
+    return;
+  }
+  requested_ = next;
+  ROS_INFO("planner: reconfigured (from the next plan): max_vel %.2f m/s, max_acc %.2f m/s^2, brake %.2f m/s^2, "
+           "clearances: safety %.2f m, search %.2f m, optimizer %.2f m",
+           after.max_vel_mps, after.max_acc_mps2, after.brake_acc_mps2, after.safety_clearance_m,
+           after.search_clearance_m, after.optimizer_clearance_m);
 }
 
 void PlannerServer::handle(const FsmOutput& out) {
@@ -454,6 +500,7 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("max_acc_mps2", max_acc);
   r.read("reference/speed_ratio", ratio);
   if (!(ratio > 0.0 && ratio <= 1.0)) r.errors() << "reference/speed_ratio must be in (0, 1]; ";
+  c.reference_speed_ratio = ratio;
   f.replanner.optimizer.max_vel_mps = max_vel;
   f.replanner.optimizer.max_acc_mps2 = max_acc;
   f.reference.max_vel_mps = ratio * max_vel;

@@ -4,9 +4,11 @@
 // simulation (a result that never comes), not a performance budget.
 
 #include <diagnostic_msgs/DiagnosticArray.h>
+#include <dynamic_reconfigure/client.h>
 #include <gtest/gtest.h>
 #include <ros/ros.h>
 #include <topo_planner/FlightResult.h>
+#include <topo_planner/PlannerConfig.h>
 
 #include <map>
 #include <string>
@@ -64,6 +66,29 @@ TEST(ClosedLoop, ReachesEveryGoalWithoutCollision) {
   for (const auto& kv : last["planner"].values)
     if (kv.key == "planning calls total") calls = kv.value;
   EXPECT_GT(std::stoi(calls.empty() ? "0" : calls), 0);
+
+  // The flight limits at run time (dynamic_reconfigure ~limits): the loaded values first; a valid
+  // change is taken, one the parameter checks refuse (braking above max_brake_acc_mps2) is reverted.
+  diag_sub.shutdown();
+  ros::AsyncSpinner spinner(1);  // the client's updates arrive while it waits
+  spinner.start();
+  dynamic_reconfigure::Client<topo_planner::PlannerConfig> limits("/planner/limits");
+  topo_planner::PlannerConfig current;
+  ASSERT_TRUE(limits.getCurrentConfiguration(current, ros::Duration(10.0))) << "no /planner/limits";
+  double max_vel = 0.0;
+  ASSERT_TRUE(ros::param::get("/planner/max_vel_mps", max_vel));
+  EXPECT_DOUBLE_EQ(current.max_vel_mps, max_vel);
+  topo_planner::PlannerConfig change = current;
+  change.max_vel_mps = 1.5;
+  change.safety_clearance_m = 0.25;
+  ASSERT_TRUE(limits.setConfiguration(change));
+  EXPECT_DOUBLE_EQ(change.max_vel_mps, 1.5);
+  EXPECT_DOUBLE_EQ(change.safety_clearance_m, 0.25);
+  topo_planner::PlannerConfig refused = change;
+  refused.brake_acc_mps2 = 19.0;
+  ASSERT_TRUE(limits.setConfiguration(refused));
+  EXPECT_DOUBLE_EQ(refused.brake_acc_mps2, current.brake_acc_mps2);  // reverted
+  EXPECT_DOUBLE_EQ(refused.max_vel_mps, 1.5);                        // the accepted change stays
 }
 
 }  // namespace

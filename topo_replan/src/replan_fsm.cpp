@@ -229,16 +229,56 @@ std::unique_ptr<ReplanFsm> ReplanFsm::create(const Config& config, std::string* 
   return std::unique_ptr<ReplanFsm>(new ReplanFsm(config, std::move(replanner)));
 }
 
+namespace {
+// The route search that may leave a narrow passage around the vehicle (routeLocked).
+GlobalRouter::Config startRouterConfig(const ReplanFsm::Config& config) {
+  GlobalRouter::Config c = config.route;
+  c.start_radius_m = std::max(c.start_radius_m, config.max_backoff_length_m + 1.0);
+  return c;
+}
+}  // namespace
+
 ReplanFsm::ReplanFsm(const Config& config, std::unique_ptr<TopoReplanner> replanner)
     : config_(config),
       replanner_(std::move(replanner)),
       router_(std::make_unique<GlobalRouter>(config.route)),
-      start_router_(std::make_unique<GlobalRouter>([&] {
-        GlobalRouter::Config c = config.route;
-        c.start_radius_m = std::max(c.start_radius_m, config.max_backoff_length_m + 1.0);
-        return c;
-      }())),
+      start_router_(std::make_unique<GlobalRouter>(startRouterConfig(config))),
       takeover_delay_s_(config.takeover_delay_s) {}
+
+ReplanFsm::Config ReplanFsm::config() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return config_;
+}
+
+bool ReplanFsm::reconfigure(const Config& config, std::string* why) {
+  std::string reason;
+  if (!config.validate(&reason)) {
+    if (why) *why = "invalid settings: " + reason;
+    return false;
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  pending_config_ = config;
+  return true;
+}
+
+void ReplanFsm::applyPendingConfigLocked(FsmOutput* out) {
+  if (!pending_config_) return;
+  std::string error;
+  std::unique_ptr<TopoReplanner> replanner = TopoReplanner::create(pending_config_->replanner, &error);
+  if (!out->message.empty()) out->message += "; ";
+  if (replanner) {
+    config_ = *pending_config_;
+    replanner_ = std::move(replanner);
+    router_ = std::make_unique<GlobalRouter>(config_.route);
+    start_router_ = std::make_unique<GlobalRouter>(startRouterConfig(config_));
+    takeover_delay_s_ = std::max(takeover_delay_s_, config_.takeover_delay_s);
+    route_stale_ = true;  // its clearance may have changed: searched again at the next reference
+    out->message += "new settings applied";
+  } else {
+    out->message += "new settings not applied: " + error;
+  }
+  pending_config_.reset();
+}
 
 FsmState ReplanFsm::state() const {
   std::lock_guard<std::mutex> lock(mutex_);
@@ -1351,6 +1391,8 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
   FsmOutput out;
   if (!std::isfinite(t)) return out;
   observeClockLocked(t, &out);
+  // (Here: the replanner and the routers are used by tick() alone, outside the lock.)
+  applyPendingConfigLocked(&out);
   if (have_odom_ && followServerLocked(t, map, &out)) return out;
   // Nothing is planned on stale inputs (checkSafety() brakes a moving vehicle); goals wait.
   std::string stale;
@@ -1505,6 +1547,8 @@ FsmOutput ReplanFsm::checkSafety(double t, const EsdfMap& map) {
   FsmOutput out;
   if (!std::isfinite(t)) return out;
   observeClockLocked(t, &out);
+  // (Here: the replanner and the routers are used by tick() alone, outside the lock.)
+  applyPendingConfigLocked(&out);
   if (have_odom_ && followServerLocked(t, map, &out)) return out;
   if (!current_ || state_ == FsmState::kInit) return out;
   const bool active = t < current_->endTime();

@@ -234,6 +234,46 @@ TEST(ReplanFsm, FliesAroundAPillarToTheGoal) {
   EXPECT_LT((log.flown.back() - Eigen::Vector3d(22, 4, 1.5)).norm(), 0.3);
 }
 
+// Settings changed at run time (dynamic_reconfigure in the planner node): invalid ones are refused
+// and change nothing; valid ones apply from the next tick, and every plan after it keeps them.
+TEST(ReplanFsm, ReconfiguredLimitsApplyFromTheNextPlan) {
+  Corridor c;
+  const EsdfMap& map = c.scene.finish();
+  auto peakSpeed = [](const FlightLog& log) {
+    double peak = 0.0;
+    for (const ExecTrajectory& t : log.trajectories) peak = std::max(peak, t.spline.maxVelocity());
+    return peak;
+  };
+  auto mapAt = [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; };
+  const ReplanFsm::Config config = testConfig();
+  auto fast = makeFsm(config);
+  const FlightLog as_configured = fly(fast.get(), {1, 4, 1.5}, {{20, 4, 1.5}}, mapAt, 600, map);
+  ASSERT_TRUE(as_configured.goal_reached);
+  ASSERT_GT(peakSpeed(as_configured), 1.5);
+
+  auto fsm = makeFsm(config);
+  std::string why;
+  ReplanFsm::Config bad = config;
+  bad.safety_clearance_m = -0.1;
+  EXPECT_FALSE(fsm->reconfigure(bad, &why));
+  EXPECT_NE(why.find("safety_clearance_m"), std::string::npos) << why;
+  bad = config;
+  bad.replanner.optimizer.max_vel_mps = std::nan("");
+  EXPECT_FALSE(fsm->reconfigure(bad, &why));
+  ReplanFsm::Config slow = config;
+  slow.replanner.optimizer.max_vel_mps = 1.0;
+  slow.reference.max_vel_mps = 0.75;
+  ASSERT_TRUE(fsm->reconfigure(slow, &why)) << why;
+  EXPECT_DOUBLE_EQ(fsm->config().replanner.optimizer.max_vel_mps, config.replanner.optimizer.max_vel_mps);  // not yet
+  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{20, 4, 1.5}}, mapAt, 1200, map);
+  EXPECT_DOUBLE_EQ(fsm->config().replanner.optimizer.max_vel_mps, 1.0);
+  EXPECT_DOUBLE_EQ(fsm->config().safety_clearance_m, config.safety_clearance_m);  // the refused one left it
+  EXPECT_TRUE(log.goal_reached);
+  std::printf("reconfigured: peak speed %.2f m/s (as configured %.2f m/s)\n", peakSpeed(log), peakSpeed(as_configured));
+  EXPECT_LE(peakSpeed(log), 1.0 * 1.05);
+  expectContinuous(log.trajectories);
+}
+
 TEST(ReplanFsm, ReplansWhenAnObstacleIsRevealedAhead) {
   Corridor before, after;
   after.scene.box({9.5, 2.5, 0.0}, {10.1, 5.5, 3.0});  // a wall across the straight line, gaps at the sides

@@ -39,8 +39,16 @@
 //                            at ~diagnostic_period (1 s by default): plan_manage/health.h
 //
 // Parameters: see readPlannerParams() and config/planner.yaml.
+//
+// Reconfigure (dynamic_reconfigure server ~limits, cfg/Planner.cfg): max_vel_mps, max_acc_mps2 (the
+// reference follows at reference/speed_ratio), brake_acc_mps2, safety_clearance_m, search_clearance_m
+// (the guide search, the A* fallback and, unless route/clearance_m set it apart, the global route)
+// and optimizer_clearance_m. It starts with the loaded values; a change is validated like the
+// parameters (ReplanFsm::reconfigure) and applied at the next tick: every plan after it keeps the
+// new values, the trajectory in flight is kept. A refused change is reverted, with a warning.
 
 #include <diagnostic_updater/diagnostic_updater.h>
+#include <dynamic_reconfigure/server.h>
 #include <nav_msgs/Odometry.h>
 #include <nav_msgs/Path.h>
 #include <geometry_msgs/PoseStamped.h>
@@ -53,6 +61,7 @@
 
 #include "topo_planner/plan_manage/health.h"
 #include "topo_planner/plan_manage/mapping_server.h"
+#include "topo_planner/PlannerConfig.h"
 #include "topo_planner/PositionCommand.h"
 #include "topo_planner/topo_replan/replan_fsm.h"
 
@@ -72,6 +81,7 @@ class PlannerServer {
     double vis_sample_s = 0.05;         ///< time step of the trajectory markers [s]
     /// Forget the map when the odometry jumps (the FSM holds, then replans in the space seen anew).
     bool clear_map_on_odom_jump = true;
+    double reference_speed_ratio = 0.75;  ///< the reference's limits / the optimiser's (reference/speed_ratio)
   };
 
   static std::unique_ptr<PlannerServer> create(const ros::NodeHandle& nh, const Config& config, std::string* error);
@@ -95,6 +105,8 @@ class PlannerServer {
   /// Passes the mapping's last fused depth frame to the FSM.
   void feedDepth();
   void publishHeartbeat(double now);
+  void reconfigureCallback(PlannerConfig& limits, uint32_t level);
+  static PlannerConfig limitsOf(const ReplanFsm::Config& fsm);
 
   ros::NodeHandle nh_;
   Config config_;
@@ -113,6 +125,9 @@ class PlannerServer {
   ros::Timer plan_timer_, safety_timer_;
   PlannerHealth health_;                                  // thread-safe
   std::unique_ptr<diagnostic_updater::Updater> diagnostics_;  // updated by the safety thread
+  boost::recursive_mutex reconfigure_mutex_;
+  std::unique_ptr<dynamic_reconfigure::Server<PlannerConfig>> reconfigure_;
+  ReplanFsm::Config requested_;  // the FSM settings last requested (reconfigure callback only)
   std::atomic<bool> initial_goals_sent_{false};  // goals_m accepted (retried every tick until then)
 };
 

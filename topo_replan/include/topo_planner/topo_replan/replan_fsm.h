@@ -280,7 +280,13 @@ class ReplanFsm {
   };
 
   static std::unique_ptr<ReplanFsm> create(const Config& config, std::string* error);
-  const Config& config() const { return config_; }
+  /// A copy of the settings in use.
+  Config config() const;
+  /// New settings (e.g. flight limits and clearances from dynamic_reconfigure), validated as those
+  /// given to create(): refused (false, the reason in *why) when invalid; otherwise applied at the
+  /// next tick(), before it plans: the replanner and the route searches are rebuilt with them, the
+  /// trajectory in flight is kept (it was checked under the old ones) and the next plan uses the new.
+  bool reconfigure(const Config& config, std::string* why);
 
   /// Latest vehicle state (position and world-frame velocity) stamped t, received at arrival_s (the
   /// caller's clock; NaN: at t). Non-finite values and stamps older than the last accepted one are
@@ -323,6 +329,7 @@ class ReplanFsm {
 
   // All *Locked functions expect mutex_ held.
   void setState(FsmState s, FsmOutput* out, const std::string& why);
+  void applyPendingConfigLocked(FsmOutput* out);
   bool startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out);
   /// The commanded state at t_takeover: on the current trajectory, or on the one it replaced when
   /// t_takeover comes before the current one's start.
@@ -385,6 +392,7 @@ class ReplanFsm {
             FsmOutput* out, const std::function<double()>& now);
 
   Config config_;
+  std::optional<Config> pending_config_;  // reconfigure(): applied at the next tick
   std::unique_ptr<TopoReplanner> replanner_;  // used by tick() only, outside the lock
 
   mutable std::mutex mutex_;
