@@ -173,6 +173,8 @@ bool readMappingParams(const ros::NodeHandle& nh, MappingServer::Config* config)
   r.read("camera/uint16_depth_scale_m", c.depth_scales.uint16_m);
 
   readExtrinsic(r, &c.T_body_camera);
+  r.read("camera/from_camera_info", c.camera_info);
+  r.read("body_frame_id", c.body_frame_id);
 
   r.read("cloud/origin_from_pose", c.cloud_origin_from_pose);
   r.readVector3("cloud/sensor_origin_m", c.cloud_sensor_origin_m);
@@ -193,7 +195,8 @@ bool readMappingParams(const ros::NodeHandle& nh, MappingServer::Config* config)
 // ---------------------------------------------------------------------------------------------
 // Construction
 
-MappingServer::MappingServer(const ros::NodeHandle& nh, const Config& config) : nh_(nh), config_(config) {}
+MappingServer::MappingServer(const ros::NodeHandle& nh, const Config& config)
+    : nh_(nh), config_(config), camera_(config.camera), extrinsic_(config.T_body_camera) {}
 
 std::unique_ptr<MappingServer> MappingServer::create(const ros::NodeHandle& nh, const Config& config,
                                                      std::string* error) {
@@ -282,6 +285,11 @@ void MappingServer::subscribeAndAdvertise() {
     odom_guard_.registerCallback(&MappingServer::odomCallback, this);
   }
   cloud_sub_ = nh_.subscribe("cloud", q, &MappingServer::cloudCallback, this);
+  if (config_.camera_info) camera_info_sub_ = nh_.subscribe("camera_info", 1, &MappingServer::cameraInfoCallback, this);
+  if (config_.pose_type == PoseType::kOdometry && !config_.body_frame_id.empty()) {
+    tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
+    tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh_);
+  }
 
   occupancy_pub_ = nh_.advertise<sensor_msgs::PointCloud2>("occupancy", 1);
   inflated_pub_ = nh_.advertise<sensor_msgs::PointCloud2>("occupancy_inflated", 1);
@@ -360,8 +368,64 @@ bool MappingServer::cameraPoseOf(const std_msgs::Header& header, const geometry_
     ROS_WARN_THROTTLE(1.0, "mapping: %s refused: %s", what, toString(status));
     return false;
   }
-  *T_world_camera = is_odometry ? T * config_.T_body_camera : T;
+  if (is_odometry) {
+    std::lock_guard<std::mutex> lock(camera_mutex_);
+    *T_world_camera = T * extrinsic_;
+  } else {
+    *T_world_camera = T;
+  }
   return true;
+}
+
+void MappingServer::cameraInfoCallback(const sensor_msgs::CameraInfoConstPtr& info) {
+  PinholeCamera camera;
+  const ConversionStatus status = cameraInfoToPinhole(*info, &camera);
+  if (status != ConversionStatus::kOk) {
+    ROS_WARN_THROTTLE(5.0, "mapping: camera info ignored: %s", toString(status));
+    return;
+  }
+  std::lock_guard<std::mutex> lock(camera_mutex_);
+  const bool changed = camera.width != camera_.width || camera.height != camera_.height || camera.fx != camera_.fx ||
+                       camera.fy != camera_.fy || camera.cx != camera_.cx || camera.cy != camera_.cy;
+  if (changed || !camera_from_info_)
+    ROS_INFO("mapping: intrinsics from %s: %d x %d, fx %.2f fy %.2f cx %.2f cy %.2f", camera_info_sub_.getTopic().c_str(),
+             camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy);
+  camera_ = camera;
+  camera_from_info_ = true;
+}
+
+Eigen::Isometry3d MappingServer::extrinsicFor(const std::string& camera_frame) {
+  if (!tf_buffer_ || camera_frame.empty()) {
+    std::lock_guard<std::mutex> lock(camera_mutex_);
+    return extrinsic_;
+  }
+  std::string error;
+  try {
+    const geometry_msgs::TransformStamped t =
+        tf_buffer_->lookupTransform(config_.body_frame_id, camera_frame, ros::Time(0));
+    geometry_msgs::Pose pose;
+    pose.position.x = t.transform.translation.x;
+    pose.position.y = t.transform.translation.y;
+    pose.position.z = t.transform.translation.z;
+    pose.orientation = t.transform.rotation;
+    Eigen::Isometry3d T;
+    if (poseToIsometry(pose, &T) == ConversionStatus::kOk) {
+      std::lock_guard<std::mutex> lock(camera_mutex_);
+      if (!extrinsic_from_tf_ || !T.isApprox(extrinsic_, 1e-9))
+        ROS_INFO("mapping: camera extrinsic from tf %s -> %s: translation (%.3f, %.3f, %.3f) m", config_.body_frame_id.c_str(),
+                 camera_frame.c_str(), T.translation().x(), T.translation().y(), T.translation().z());
+      extrinsic_ = T;
+      extrinsic_from_tf_ = true;
+      return T;
+    }
+    error = "not a rigid transform";
+  } catch (const tf2::TransformException& e) {
+    error = e.what();
+  }
+  std::lock_guard<std::mutex> lock(camera_mutex_);
+  ROS_WARN_THROTTLE(5.0, "mapping: no tf %s -> %s (%s): the %s extrinsic is used", config_.body_frame_id.c_str(),
+                    camera_frame.c_str(), error.c_str(), extrinsic_from_tf_ ? "last tf" : "parameters'");
+  return extrinsic_;
 }
 
 void MappingServer::depthPoseCallback(const sensor_msgs::ImageConstPtr& image,
@@ -376,6 +440,7 @@ void MappingServer::depthPoseCallback(const sensor_msgs::ImageConstPtr& image,
 }
 
 void MappingServer::depthOdomCallback(const sensor_msgs::ImageConstPtr& image, const nav_msgs::OdometryConstPtr& odom) {
+  if (tf_buffer_) extrinsicFor(image->header.frame_id);  // refreshes the extrinsic in use
   Eigen::Isometry3d T_world_camera;
   if (!cameraPoseOf(odom->header, odom->pose.pose, true, &T_world_camera)) {
     ++frames_refused_;
@@ -416,8 +481,13 @@ void MappingServer::fuseDepth(const sensor_msgs::Image& image, const Eigen::Isom
                       image.data.size());
     return;
   }
+  PinholeCamera camera;
+  {
+    std::lock_guard<std::mutex> lock(camera_mutex_);
+    camera = camera_;
+  }
   integrate("depth image", image.header.stamp, T_world_camera.translation(), [&](OccupancyMap& map) {
-    return map.fuseDepthImage(view, config_.camera, T_world_camera);
+    return map.fuseDepthImage(view, camera, T_world_camera);
   });
 }
 

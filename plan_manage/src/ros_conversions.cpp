@@ -84,6 +84,8 @@ const char* toString(ConversionStatus status) {
     case ConversionStatus::kInvalidPose: return "invalid pose (NaN/inf, or quaternion not of unit norm)";
     case ConversionStatus::kMissingFields: return "point cloud lacks FLOAT32/FLOAT64 x, y, z fields";
     case ConversionStatus::kTruncatedCloud: return "point cloud data shorter than its header says";
+    case ConversionStatus::kInvalidCameraInfo:
+      return "camera info without usable intrinsics (K not finite, focal length <= 0, zero size, binning or ROI)";
   }
   return "unknown status";
 }
@@ -194,6 +196,28 @@ void pointsToPointCloud2(const std::vector<Eigen::Vector3d>& points, const std::
     *in = intensities[i];
     ++x, ++y, ++z, ++in;
   }
+}
+
+ConversionStatus cameraInfoToPinhole(const sensor_msgs::CameraInfo& msg, PinholeCamera* camera) {
+  const auto& K = msg.K;
+  const bool finite = std::all_of(K.begin(), K.end(), [](double v) { return std::isfinite(v); });
+  const bool binned = msg.binning_x > 1 || msg.binning_y > 1;
+  const auto& roi = msg.roi;
+  const bool cropped = (roi.width != 0 || roi.height != 0 || roi.x_offset != 0 || roi.y_offset != 0) &&
+                       !(roi.x_offset == 0 && roi.y_offset == 0 && roi.width == msg.width && roi.height == msg.height);
+  if (!finite || binned || cropped || msg.width == 0 || msg.height == 0 || msg.width > 1u << 16 ||
+      msg.height > 1u << 16 || !(K[0] > 0.0) || !(K[4] > 0.0))
+    return ConversionStatus::kInvalidCameraInfo;
+  PinholeCamera c;
+  c.width = int(msg.width);
+  c.height = int(msg.height);
+  c.fx = K[0];
+  c.fy = K[4];
+  c.cx = K[2];
+  c.cy = K[5];
+  if (!c.valid()) return ConversionStatus::kInvalidCameraInfo;
+  *camera = c;
+  return ConversionStatus::kOk;
 }
 
 void healthToStatus(const HealthReport& report, diagnostic_updater::DiagnosticStatusWrapper* status) {

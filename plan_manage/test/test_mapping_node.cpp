@@ -19,7 +19,9 @@
 #include <gtest/gtest.h>
 #include <nav_msgs/Odometry.h>
 #include <ros/ros.h>
+#include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+#include <tf2_ros/static_transform_broadcaster.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
 
@@ -488,6 +490,54 @@ TEST(MappingNode, WindowFollowsTheVehicle) {
                         [&](int) { t.sendDepthWithPose(image, pose); }));
   expectWall(t.occupancy_, wall_index);
   for (const Eigen::Vector3d& p : readXyz(*t.occupancy_.latest)) EXPECT_GE(p.x(), -2.0);
+}
+
+// The intrinsics come from camera_info (the node's parameters say fx = fy = 200: with them the
+// wall would be mapped half as wide, its edges missing). An unusable camera_info is ignored.
+TEST(MappingNode, IntrinsicsFromCameraInfo) {
+  MappingNodeCase t("info");
+  ros::Publisher info_pub = t.nh_.advertise<sensor_msgs::CameraInfo>("/info/camera_info", 10, true);
+  ASSERT_TRUE(t.connect(t.depth_pub_) && t.connect(t.pose_pub_)) << "mapping_info did not come up";
+  sensor_msgs::CameraInfo bad;
+  bad.width = kWidth, bad.height = kHeight;
+  bad.K = {std::nan(""), 0, kCx, 0, kFy, kCy, 0, 0, 1};
+  info_pub.publish(bad);
+  ros::WallDuration(0.2).sleep();
+  sensor_msgs::CameraInfo info;
+  info.header.frame_id = "camera_optical";
+  info.width = kWidth, info.height = kHeight;
+  info.K = {kFx, 0, kCx, 0, kFy, kCy, 0, 0, 1};
+  info_pub.publish(info);
+  ASSERT_TRUE(spinUntil([&] { return info_pub.getNumSubscribers() > 0; }));
+  ros::WallDuration(0.3).sleep();  // the latched info reaches the node before the first frame
+  const geometry_msgs::Pose pose = makePose(kCameraPosition, kLookAlongX);
+  const sensor_msgs::Image image = renderDepth(Encoding::kFloat32, kCameraPosition, kFaceX, false);
+  ASSERT_TRUE(spinUntil([&] { return wallComplete(t.occupancy_); }, [&](int) { t.sendDepthWithPose(image, pose); }))
+      << "the wall was not mapped with the camera_info intrinsics";
+  expectWall(t.occupancy_);
+}
+
+// The camera extrinsic comes from tf, base_link -> the image's frame (the node's parameters give
+// no rotation: with them the wall would appear overhead).
+TEST(MappingNode, ExtrinsicFromTf) {
+  MappingNodeCase t("tf");
+  ASSERT_TRUE(t.connect(t.depth_pub_) && t.connect(t.odom_pub_)) << "mapping_tf did not come up";
+  tf2_ros::StaticTransformBroadcaster broadcaster;
+  geometry_msgs::TransformStamped body_camera;
+  body_camera.header.stamp = ros::Time::now();
+  body_camera.header.frame_id = "base_link";
+  body_camera.child_frame_id = "tf_camera_optical";
+  body_camera.transform.translation.x = 0.1;
+  body_camera.transform.rotation.x = -0.5, body_camera.transform.rotation.y = 0.5;
+  body_camera.transform.rotation.z = -0.5, body_camera.transform.rotation.w = 0.5;
+  broadcaster.sendTransform(body_camera);
+  const Eigen::Vector3d body(0.0, 0.0, 1.0), camera = body + Eigen::Vector3d(0.1, 0.0, 0.0);
+  sensor_msgs::Image image = renderDepth(Encoding::kFloat32, camera, kFaceX, false);
+  image.header.frame_id = "tf_camera_optical";
+  const geometry_msgs::Pose body_pose = makePose(body, Eigen::Quaterniond::Identity());
+  ASSERT_TRUE(spinUntil([&] { return wallComplete(t.occupancy_); }, [&](int) { t.sendDepthWithOdometry(image, body_pose); }))
+      << "the wall was not mapped with the tf extrinsic";
+  expectWall(t.occupancy_);
 }
 
 }  // namespace

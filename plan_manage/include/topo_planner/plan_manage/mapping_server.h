@@ -11,6 +11,9 @@
 //                                                     z forward) in frame_id; used when pose_type = pose
 //     ~odometry            nav_msgs/Odometry          pose of the body in frame_id; the camera pose is
 //                                                     odometry * extrinsic; used when pose_type = odometry
+//     ~camera_info         sensor_msgs/CameraInfo     the depth camera's intrinsics (K, width, height), used
+//                                                     from the first valid one on (camera/from_camera_info); until
+//                                                     then, and when it is off, camera/* below
 //     ~cloud               sensor_msgs/PointCloud2    points in frame_id (x, y, z FLOAT32 or FLOAT64); the
 //                                                     sensor origin is the latest pose/odometry camera
 //                                                     position, or cloud/sensor_origin_m
@@ -52,6 +55,11 @@
 //   extrinsic/quaternion_xyzw   [-0.5, 0.5, -0.5, 0.5] rotation body <- camera optical frame (a camera
 //                                         looking along body +x in a FLU body frame)
 //   extrinsic/matrix_row_major  []        alternatively the 4x4 T_body_camera, 16 values row-major
+//   camera/from_camera_info     true      intrinsics from ~camera_info once one arrives (camera/* until then)
+//   body_frame_id               ""        with pose_type odometry: the extrinsic from tf2, body_frame_id ->
+//                                         the depth image's header frame_id (as a robot's URDF / static
+//                                         transform publisher give it); extrinsic/* until tf has it.
+//                                         Empty: extrinsic/* only
 //   cloud/origin_from_pose      true      sensor origin of a cloud = latest camera position
 //   cloud/sensor_origin_m       [0, 0, 0] the fixed sensor origin otherwise [m]
 //   cloud/max_pose_age_s        0.2       refuse a cloud whose latest pose is older/newer than this [s]
@@ -72,8 +80,11 @@
 #include <message_filters/synchronizer.h>
 #include <nav_msgs/Odometry.h>
 #include <ros/ros.h>
+#include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/PointCloud2.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_listener.h>
 
 #include <atomic>
 #include <functional>
@@ -118,6 +129,8 @@ class MappingServer {
     /// Camera optical frame in the body frame (odometry only). Default: camera at the body origin
     /// looking along body +x of a FLU body (optical z = body x, x = -body y, y = -body z).
     Eigen::Isometry3d T_body_camera = defaultBodyToCamera();
+    bool camera_info = true;      ///< intrinsics from ~camera_info once a valid one arrives
+    std::string body_frame_id;    ///< non-empty: T_body_camera from tf2 (body -> image frame), YAML until then
     int sync_queue_size = 10;           ///< ApproximateTime queue per topic [messages]
     double sync_max_interval_s = 0.05;  ///< largest stamp difference of a depth/pose pair; 0 = no limit [s]
 
@@ -182,6 +195,9 @@ class MappingServer {
   void odomCallback(const nav_msgs::OdometryConstPtr& odom);
   void cloudCallback(const sensor_msgs::PointCloud2ConstPtr& cloud);
   void fuseDepth(const sensor_msgs::Image& image, const Eigen::Isometry3d& T_world_camera);
+  void cameraInfoCallback(const sensor_msgs::CameraInfoConstPtr& info);
+  /// The body -> camera transform for an image in `camera_frame` (tf2 or the parameters).
+  Eigen::Isometry3d extrinsicFor(const std::string& camera_frame);
   /// Camera pose of a pose/odometry message, or false (with a throttled warning) if it is unusable.
   bool cameraPoseOf(const std_msgs::Header& header, const geometry_msgs::Pose& pose, bool is_odometry,
                     Eigen::Isometry3d* T_world_camera) const;
@@ -219,7 +235,14 @@ class MappingServer {
   StampGuard<nav_msgs::Odometry> odom_guard_;
   std::unique_ptr<message_filters::Synchronizer<ImagePoseSync>> pose_sync_;
   std::unique_ptr<message_filters::Synchronizer<ImageOdomSync>> odom_sync_;
-  ros::Subscriber cloud_sub_;
+  ros::Subscriber cloud_sub_, camera_info_sub_;
+  mutable std::mutex camera_mutex_;   // guards camera_, extrinsic_
+  PinholeCamera camera_;              // the intrinsics in use (camera/*, then ~camera_info)
+  bool camera_from_info_ = false;
+  Eigen::Isometry3d extrinsic_;       // the body -> camera transform in use (extrinsic/*, then tf2)
+  bool extrinsic_from_tf_ = false;
+  std::unique_ptr<tf2_ros::Buffer> tf_buffer_;            // with body_frame_id only
+  std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
   ros::Publisher occupancy_pub_, inflated_pub_, esdf_slice_pub_;
   ros::Timer occupancy_timer_, esdf_timer_;
 };

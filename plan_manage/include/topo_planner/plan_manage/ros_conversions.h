@@ -7,6 +7,7 @@
 #include <diagnostic_updater/DiagnosticStatusWrapper.h>
 #include <geometry_msgs/Pose.h>
 #include <ros/time.h>
+#include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/PointCloud2.h>
 
@@ -29,6 +30,7 @@ enum class ConversionStatus {
   kInvalidPose,          ///< NaN/inf position or orientation, or a quaternion far from unit norm
   kMissingFields,        ///< point cloud without FLOAT32 (or FLOAT64) x, y, z fields
   kTruncatedCloud,       ///< point cloud data shorter than its header says
+  kInvalidCameraInfo,    ///< CameraInfo without a usable K (NaN, non-positive focal length, zero size) or binned / cropped
 };
 
 const char* toString(ConversionStatus status);
@@ -60,6 +62,12 @@ void pointsToPointCloud2(const std::vector<Eigen::Vector3d>& points, const std::
 /// As pointsToPointCloud2 with a FLOAT32 `intensity` field; intensities.size() == points.size().
 void pointsToPointCloud2(const std::vector<Eigen::Vector3d>& points, const std::vector<float>& intensities,
                          const std::string& frame_id, const ros::Time& stamp, sensor_msgs::PointCloud2* msg);
+
+/// Pinhole intrinsics of a CameraInfo (K: fx, fy, cx, cy; width, height). The depth image is taken
+/// as rectified (distortion is not applied: a depth driver's rectified or aligned stream). Binning
+/// or a region of interest other than the full image is refused, as is a K that is not finite or
+/// has a non-positive focal length, or a zero size.
+ConversionStatus cameraInfoToPinhole(const sensor_msgs::CameraInfo& msg, PinholeCamera* camera);
 
 /// A health report (plan_manage/health.h) as a diagnostic status: level, message and values.
 void healthToStatus(const HealthReport& report, diagnostic_updater::DiagnosticStatusWrapper* status);
