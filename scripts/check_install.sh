@@ -13,6 +13,8 @@
 # BUILD_DIR is the catkin build directory of a workspace whose targets are built (make test builds
 # them first). Exit status 0 when every case passes; with XUNIT_FILE, the cases as JUnit XML.
 set -uo pipefail
+# shellcheck source=scripts/junit.sh
+source "$(dirname "${BASH_SOURCE[0]}")/junit.sh"
 
 BUILD=$(cd "$1" && pwd)
 WORK=$2
@@ -92,19 +94,5 @@ for name in "${names[@]}"; do
   echo "install space, $name: ${status[$name]}: ${message[$name]}"
   [ "${status[$name]}" = pass ] || failures=$((failures + 1))
 done
-if [ -n "$XUNIT" ]; then
-  mkdir -p "$(dirname "$XUNIT")"
-  {
-    echo '<?xml version="1.0" encoding="UTF-8"?>'
-    echo "<testsuite name=\"install_space\" tests=\"${#names[@]}\" failures=\"$failures\" errors=\"0\">"
-    for name in "${names[@]}"; do
-      echo "  <testcase classname=\"install_space\" name=\"$name\">"
-      if [ "${status[$name]}" != pass ]; then
-        printf '    <failure message="%s"/>\n' "$(sed 's/&/\&amp;/g; s/"/\&quot;/g; s/</\&lt;/g' <<<"${message[$name]}")"
-      fi
-      echo "  </testcase>"
-    done
-    echo "</testsuite>"
-  } >"$XUNIT"
-fi
+[ -n "$XUNIT" ] && write_junit "$XUNIT" install_space "${names[@]}"
 [ "$failures" -eq 0 ]

@@ -16,6 +16,8 @@
 # XUNIT_FILE, writes the result there as JUnit XML, one test case per build system (catkin's
 # run_tests reads it).
 set -uo pipefail
+# shellcheck source=scripts/junit.sh
+source "$(dirname "${BASH_SOURCE[0]}")/junit.sh"
 
 ROOT=$(cd "$1" && pwd)
 WORK=$2
@@ -82,19 +84,5 @@ for name in catkin_make catkin_build; do
   echo "name clash, $name: ${status[$name]}: ${message[$name]}"
   [ "${status[$name]}" = pass ] || failures=$((failures + 1))
 done
-if [ -n "$XUNIT" ]; then
-  mkdir -p "$(dirname "$XUNIT")"
-  {
-    echo '<?xml version="1.0" encoding="UTF-8"?>'
-    echo "<testsuite name=\"name_clash\" tests=\"2\" failures=\"$failures\" errors=\"0\">"
-    for name in catkin_make catkin_build; do
-      echo "  <testcase classname=\"name_clash\" name=\"$name\">"
-      if [ "${status[$name]}" != pass ]; then
-        printf '    <failure message="%s"/>\n' "$(sed 's/&/\&amp;/g; s/"/\&quot;/g; s/</\&lt;/g' <<<"${message[$name]}")"
-      fi
-      echo "  </testcase>"
-    done
-    echo "</testsuite>"
-  } >"$XUNIT"
-fi
+[ -n "$XUNIT" ] && write_junit "$XUNIT" name_clash catkin_make catkin_build
 [ "$failures" -eq 0 ]
