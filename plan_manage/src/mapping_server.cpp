@@ -394,11 +394,8 @@ void MappingServer::cameraInfoCallback(const sensor_msgs::CameraInfoConstPtr& in
   camera_from_info_ = true;
 }
 
-Eigen::Isometry3d MappingServer::extrinsicFor(const std::string& camera_frame) {
-  if (!tf_buffer_ || camera_frame.empty()) {
-    std::lock_guard<std::mutex> lock(camera_mutex_);
-    return extrinsic_;
-  }
+void MappingServer::refreshExtrinsic(const std::string& camera_frame) {
+  if (!tf_buffer_ || camera_frame.empty()) return;
   std::string error;
   try {
     const geometry_msgs::TransformStamped t =
@@ -416,7 +413,7 @@ Eigen::Isometry3d MappingServer::extrinsicFor(const std::string& camera_frame) {
                  camera_frame.c_str(), T.translation().x(), T.translation().y(), T.translation().z());
       extrinsic_ = T;
       extrinsic_from_tf_ = true;
-      return T;
+      return;
     }
     error = "not a rigid transform";
   } catch (const tf2::TransformException& e) {
@@ -425,7 +422,6 @@ Eigen::Isometry3d MappingServer::extrinsicFor(const std::string& camera_frame) {
   std::lock_guard<std::mutex> lock(camera_mutex_);
   ROS_WARN_THROTTLE(5.0, "mapping: no tf %s -> %s (%s): the %s extrinsic is used", config_.body_frame_id.c_str(),
                     camera_frame.c_str(), error.c_str(), extrinsic_from_tf_ ? "last tf" : "parameters'");
-  return extrinsic_;
 }
 
 void MappingServer::depthPoseCallback(const sensor_msgs::ImageConstPtr& image,
@@ -440,7 +436,7 @@ void MappingServer::depthPoseCallback(const sensor_msgs::ImageConstPtr& image,
 }
 
 void MappingServer::depthOdomCallback(const sensor_msgs::ImageConstPtr& image, const nav_msgs::OdometryConstPtr& odom) {
-  if (tf_buffer_) extrinsicFor(image->header.frame_id);  // refreshes the extrinsic in use
+  refreshExtrinsic(image->header.frame_id);
   Eigen::Isometry3d T_world_camera;
   if (!cameraPoseOf(odom->header, odom->pose.pose, true, &T_world_camera)) {
     ++frames_refused_;

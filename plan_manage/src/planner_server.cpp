@@ -236,6 +236,13 @@ void PlannerServer::safetyTimer(const ros::TimerEvent&) {
   }
 }
 
+void setFlightLimits(double max_vel, double max_acc, double reference_ratio, ReplanFsm::Config* f) {
+  f->replanner.optimizer.max_vel_mps = max_vel;
+  f->replanner.optimizer.max_acc_mps2 = max_acc;
+  f->reference.max_vel_mps = reference_ratio * max_vel;
+  f->reference.max_acc_mps2 = reference_ratio * max_acc;
+}
+
 PlannerConfig PlannerServer::limitsOf(const ReplanFsm::Config& f) {
   PlannerConfig c;
   c.max_vel_mps = f.replanner.optimizer.max_vel_mps;
@@ -250,10 +257,7 @@ PlannerConfig PlannerServer::limitsOf(const ReplanFsm::Config& f) {
 void PlannerServer::reconfigureCallback(PlannerConfig& limits, uint32_t) {
   ReplanFsm::Config next = requested_;
   TopoReplanner::Config& p = next.replanner;
-  p.optimizer.max_vel_mps = limits.max_vel_mps;
-  p.optimizer.max_acc_mps2 = limits.max_acc_mps2;
-  next.reference.max_vel_mps = config_.reference_speed_ratio * limits.max_vel_mps;
-  next.reference.max_acc_mps2 = config_.reference_speed_ratio * limits.max_acc_mps2;
+  setFlightLimits(limits.max_vel_mps, limits.max_acc_mps2, config_.reference_speed_ratio, &next);
   next.brake_acc_mps2 = limits.brake_acc_mps2;
   next.safety_clearance_m = limits.safety_clearance_m;
   if (requested_.route.clearance_m == requested_.replanner.search.clearance_m) next.route.clearance_m = limits.search_clearance_m;
@@ -501,10 +505,7 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("reference/speed_ratio", ratio);
   if (!(ratio > 0.0 && ratio <= 1.0)) r.errors() << "reference/speed_ratio must be in (0, 1]; ";
   c.reference_speed_ratio = ratio;
-  f.replanner.optimizer.max_vel_mps = max_vel;
-  f.replanner.optimizer.max_acc_mps2 = max_acc;
-  f.reference.max_vel_mps = ratio * max_vel;
-  f.reference.max_acc_mps2 = ratio * max_acc;
+  setFlightLimits(max_vel, max_acc, ratio, &f);
   f.reference.max_segment_length_m = 3.0;
   f.reference.cruise_timing = true;
   r.read("reference/max_segment_length_m", f.reference.max_segment_length_m);

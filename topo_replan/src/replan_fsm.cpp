@@ -54,7 +54,8 @@ class StopProfile {
   static constexpr double kOnsetRamp = 0.1;  // [s per a] from no acceleration to full deceleration
   static constexpr double kStopRamp = 0.2;   // [s] from full deceleration to none, at the end
   static constexpr double kStep = 0.002;     // [s]
-  StopProfile(double speed, double decel, double start_acc) {
+  /// keep_samples false: only length() is kept (the commitment sizes many stops).
+  StopProfile(double speed, double decel, double start_acc, bool keep_samples = true) {
     s_.push_back(0.0);
     double v = std::isfinite(speed) ? std::max(0.0, speed) : 0.0;
     if (v <= 1e-6) return;
@@ -81,9 +82,10 @@ class StopProfile {
       dist += 0.5 * (v + v_next) * kStep;
       v = v_next;
       acc = next;
-      s_.push_back(dist);
+      if (keep_samples) s_.push_back(dist);
     }
   }
+  /// (With keep_samples only.)
   double duration() const { return s_.size() <= 1 ? 0.0 : (double(s_.size()) - 2.0 + end_fraction_) * kStep; }
   double length() const { return s_.back(); }
   double distance(double tau) const {
@@ -769,8 +771,14 @@ bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const 
   const Eigen::Vector3d v0 = vel.evaluate(0.0), a0 = acc.evaluate(0.0);
   double tau_b = 0.0;
   bool cut = false;
+  // Stop lengths from each sample, at the planning deceleration computed once (shared by the margins).
+  std::vector<double> length_at_a(taus.size(), -1.0);
+  auto stopLength = [&](size_t k, double decel) {
+    if (decel != a) return StopProfile(speed[k], decel, along[k], false).length();
+    if (length_at_a[k] < 0.0) length_at_a[k] = StopProfile(speed[k], a, along[k], false).length();
+    return length_at_a[k];
+  };
   for (const double margin : {config_.commit_margin_m, config_.commit_margin_m + 0.15, config_.commit_margin_m + 0.4}) {
-    auto stopLength = [&](size_t k, double decel) { return StopProfile(speed[k], decel, along[k]).length(); };
     size_t kb = 0;
     while (kb + 1 < taus.size() && stopLength(kb + 1, a) + margin <= blocked_s - arc[kb + 1]) ++kb;
     double a_stop = a;
@@ -1391,7 +1399,8 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
   FsmOutput out;
   if (!std::isfinite(t)) return out;
   observeClockLocked(t, &out);
-  // (Here: the replanner and the routers are used by tick() alone, outside the lock.)
+  // Here only, not in checkSafety(): the replanner and the routers are used by tick() alone,
+  // outside the lock, so only tick() may replace them.
   applyPendingConfigLocked(&out);
   if (have_odom_ && followServerLocked(t, map, &out)) return out;
   // Nothing is planned on stale inputs (checkSafety() brakes a moving vehicle); goals wait.
@@ -1547,8 +1556,6 @@ FsmOutput ReplanFsm::checkSafety(double t, const EsdfMap& map) {
   FsmOutput out;
   if (!std::isfinite(t)) return out;
   observeClockLocked(t, &out);
-  // (Here: the replanner and the routers are used by tick() alone, outside the lock.)
-  applyPendingConfigLocked(&out);
   if (have_odom_ && followServerLocked(t, map, &out)) return out;
   if (!current_ || state_ == FsmState::kInit) return out;
   const bool active = t < current_->endTime();

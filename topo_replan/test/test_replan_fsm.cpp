@@ -265,6 +265,9 @@ TEST(ReplanFsm, ReconfiguredLimitsApplyFromTheNextPlan) {
   slow.reference.max_vel_mps = 0.75;
   ASSERT_TRUE(fsm->reconfigure(slow, &why)) << why;
   EXPECT_DOUBLE_EQ(fsm->config().replanner.optimizer.max_vel_mps, config.replanner.optimizer.max_vel_mps);  // not yet
+  // Nor at a safety check: the safety thread must not replace what the tick thread plans with.
+  fsm->checkSafety(0.0, map);
+  EXPECT_DOUBLE_EQ(fsm->config().replanner.optimizer.max_vel_mps, config.replanner.optimizer.max_vel_mps);
   const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{20, 4, 1.5}}, mapAt, 1200, map);
   EXPECT_DOUBLE_EQ(fsm->config().replanner.optimizer.max_vel_mps, 1.0);
   EXPECT_DOUBLE_EQ(fsm->config().safety_clearance_m, config.safety_clearance_m);  // the refused one left it

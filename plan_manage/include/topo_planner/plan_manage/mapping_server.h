@@ -196,8 +196,8 @@ class MappingServer {
   void cloudCallback(const sensor_msgs::PointCloud2ConstPtr& cloud);
   void fuseDepth(const sensor_msgs::Image& image, const Eigen::Isometry3d& T_world_camera);
   void cameraInfoCallback(const sensor_msgs::CameraInfoConstPtr& info);
-  /// The body -> camera transform for an image in `camera_frame` (tf2 or the parameters).
-  Eigen::Isometry3d extrinsicFor(const std::string& camera_frame);
+  /// With body_frame_id: the extrinsic in use from tf (body -> `camera_frame`), when tf has it.
+  void refreshExtrinsic(const std::string& camera_frame);
   /// Camera pose of a pose/odometry message, or false (with a throttled warning) if it is unusable.
   bool cameraPoseOf(const std_msgs::Header& header, const geometry_msgs::Pose& pose, bool is_odometry,
                     Eigen::Isometry3d* T_world_camera) const;

@@ -131,6 +131,10 @@ class PlannerServer {
   std::atomic<bool> initial_goals_sent_{false};  // goals_m accepted (retried every tick until then)
 };
 
+/// The vehicle's limits (the optimiser's) and the reference's, reference_ratio of them, so that
+/// detours need no time stretching (readPlannerParams and the reconfigure server).
+void setFlightLimits(double max_vel, double max_acc, double reference_ratio, ReplanFsm::Config* fsm);
+
 /// Reads the planner's parameters (and the mapping's, under ~mapping) with the struct defaults,
 /// validates them, and returns false after a ROS_ERROR saying what is wrong.
 bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config);
