@@ -16,6 +16,7 @@ bool GlobalRouter::Config::validate(std::string* why) const {
   if (!(preferred_clearance_m > 0.0) || !std::isfinite(preferred_clearance_m))
     return bad("route preferred_clearance_m must be finite and > 0");
   if (!(clearance_weight >= 0.0) || !std::isfinite(clearance_weight)) return bad("route clearance_weight must be >= 0");
+  if (!(avoid_weight >= 0.0) || !std::isfinite(avoid_weight)) return bad("route avoid_weight must be >= 0");
   if (!(heuristic_weight >= 1.0) || !std::isfinite(heuristic_weight)) return bad("route heuristic_weight must be >= 1");
   if (!(min_z_m < max_z_m)) return bad("route min_z_m must be below max_z_m");
   if (!(end_radius_m >= 0.0) || !std::isfinite(end_radius_m)) return bad("route end_radius_m must be finite and >= 0");
@@ -25,6 +26,12 @@ bool GlobalRouter::Config::validate(std::string* why) const {
   if (max_expansions < 1) return bad("route max_expansions must be >= 1");
   if (shortcut_lookahead < 1) return bad("route shortcut_lookahead must be >= 1");
   return true;
+}
+
+void GlobalRouter::setAvoided(const std::vector<Zone>& zones) {
+  avoided_.clear();
+  for (const Zone& z : zones)
+    if (z.center.allFinite() && std::isfinite(z.radius_m) && z.radius_m > 0.0) avoided_.push_back(z);
 }
 
 GlobalRouter::Result GlobalRouter::route(const EsdfMap& map, const Eigen::Vector3d& start, const Eigen::Vector3d& goal) {
@@ -121,6 +128,22 @@ GlobalRouter::Result GlobalRouter::route(const EsdfMap& map, const Eigen::Vector
   }
   const double w = config_.clearance_weight, pref = config_.preferred_clearance_m;
   auto heuristic = [&](const Eigen::Vector3d& q) { return float(config_.heuristic_weight * (q - goal).norm()); };
+  auto avoided = [&](const Eigen::Vector3d& q) {
+    for (const Zone& z : avoided_)
+      if ((q - z.center).squaredNorm() < z.radius_m * z.radius_m) return true;
+    return false;
+  };
+  // A shortcut from a to b crosses a zone that holds neither of them.
+  auto crossesZone = [&](const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+    for (const Zone& z : avoided_) {
+      const double r2 = z.radius_m * z.radius_m;
+      if ((a - z.center).squaredNorm() < r2 || (b - z.center).squaredNorm() < r2) continue;
+      const Eigen::Vector3d ab = b - a;
+      const double u = ab.squaredNorm() > 0.0 ? std::clamp((z.center - a).dot(ab) / ab.squaredNorm(), 0.0, 1.0) : 0.0;
+      if ((a + u * ab - z.center).squaredNorm() < r2) return true;
+    }
+    return false;
+  };
 
   struct Item {
     float f;
@@ -161,7 +184,8 @@ GlobalRouter::Result GlobalRouter::route(const EsdfMap& map, const Eigen::Vector
           float dn;
           if (!usable(a, nb, &pn, &dn)) continue;
           if (a == ae) pn = goal;
-          const double penalty = 1.0 + w * std::max(0.0, pref - double(dn)) / pref;
+          double penalty = 1.0 + w * std::max(0.0, pref - double(dn)) / pref;
+          if (!avoided_.empty() && avoided(pn)) penalty *= 1.0 + config_.avoid_weight;
           const float cost = gc + float((pn - pc).norm() * penalty);
           if (stamp_[a] == generation_ && g_[a] <= cost) continue;
           stamp_[a] = generation_;
@@ -193,7 +217,7 @@ GlobalRouter::Result GlobalRouter::route(const EsdfMap& map, const Eigen::Vector
   while (anchor + 1 < raw.size()) {
     size_t best = anchor + 1;
     for (size_t j = anchor + 2; j < raw.size() && j <= best + size_t(config_.shortcut_lookahead); ++j)
-      if (checker.lineVisible(raw[anchor], raw[j])) best = j;
+      if (checker.lineVisible(raw[anchor], raw[j]) && !crossesZone(raw[anchor], raw[j])) best = j;
     path.push_back(raw[best]);
     anchor = best;
   }

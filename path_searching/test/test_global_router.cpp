@@ -65,6 +65,53 @@ TEST(GlobalRouter, FindsAWindowFarAsideInAWall) {
   EXPECT_NE(local.status, SearchStatus::kSuccess);
 }
 
+// Where the line of the route crosses x = 12 (every crossing), resampled at 5 cm.
+std::vector<Eigen::Vector3d> wallCrossings(const Path& path) {
+  std::vector<Eigen::Vector3d> crossings;
+  const Path fine = resamplePath(path, 0.05);
+  for (size_t i = 1; i < fine.size(); ++i)
+    if ((fine[i - 1].x() - 12.0) * (fine[i].x() - 12.0) <= 0.0) crossings.push_back(fine[i]);
+  return crossings;
+}
+
+// Avoided zones (the FSM's stalls) weigh: the route takes the other window when the near one is
+// avoided, goes through an avoided one when it is the only way (no false proof of unreachability),
+// and its shortcuts do not cut through a zone.
+TEST(GlobalRouter, AvoidedZonesWeighButNeverBlock) {
+  SyntheticScene scene(Eigen::Vector3d(24.0, 16.0, 3.0));
+  scene.fill([](const Eigen::Vector3d& p) {
+    const bool in_wall = p.x() >= 11.9 && p.x() <= 12.1;
+    const bool near = std::abs(p.y() - 8.0) <= 0.5 && std::abs(p.z() - 1.5) <= 0.5;
+    const bool far = std::abs(p.y() - 13.0) <= 0.5 && std::abs(p.z() - 1.5) <= 0.5;
+    return in_wall && !near && !far;
+  });
+  const EsdfMap& map = scene.finish();
+  GlobalRouter router{GlobalRouter::Config()};
+  const Eigen::Vector3d start(2, 8, 1.5), goal(22, 8, 1.5);
+  GlobalRouter::Result r = router.route(map, start, goal);
+  ASSERT_EQ(r.status, SearchStatus::kSuccess);
+  for (const Eigen::Vector3d& c : wallCrossings(r.path)) EXPECT_NEAR(c.y(), 8.0, 0.5);
+
+  router.setAvoided({{Eigen::Vector3d(11.0, 8.0, 1.5), 1.5}, {Eigen::Vector3d(NAN, 0, 0), 1.0}});
+  ASSERT_EQ(router.avoided().size(), 1u);  // the non-finite zone is dropped
+  r = router.route(map, start, goal);
+  ASSERT_EQ(r.status, SearchStatus::kSuccess);
+  const std::vector<Eigen::Vector3d> crossings = wallCrossings(r.path);
+  ASSERT_FALSE(crossings.empty());
+  for (const Eigen::Vector3d& c : crossings) EXPECT_NEAR(c.y(), 13.0, 0.5);
+  for (const Eigen::Vector3d& p : resamplePath(r.path, 0.05))
+    EXPECT_GT((p - Eigen::Vector3d(11.0, 8.0, 1.5)).norm(), 1.5 - 0.2) << p.transpose();
+
+  // The far window closed: the avoided near one is the only way, and it is taken.
+  SyntheticScene one = wallWithWindow(8.0, 1.5);
+  const EsdfMap& one_map = one.finish();
+  r = router.route(one_map, start, goal);
+  ASSERT_EQ(r.status, SearchStatus::kSuccess);
+  for (const Eigen::Vector3d& c : wallCrossings(r.path)) EXPECT_NEAR(c.y(), 8.0, 0.5);
+  router.setAvoided({});
+  EXPECT_TRUE(router.avoided().empty());
+}
+
 TEST(GlobalRouter, AClosedWallProvesTheGoalUnreachable) {
   SyntheticScene scene(Eigen::Vector3d(24.0, 8.0, 3.0));
   scene.box({11.8, -1, -1}, {12.2, 9, 4});

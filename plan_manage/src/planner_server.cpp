@@ -487,9 +487,13 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("fsm/max_backoffs", f.max_backoffs);
   r.read("fsm/max_look_holds", f.max_look_holds);
   r.read("fsm/mission_timeout_s", f.mission_timeout_s);
+  r.read("fsm/progress_timeout_s", f.progress_timeout_s);
+  r.read("fsm/progress_min_gain_m", f.progress_min_gain_m);
+  r.read("fsm/stall_zone_radius_m", f.stall_zone_radius_m);
   r.read("route/enabled", f.global_route);
   r.read("route/cell_voxels", f.route.cell_voxels);
   r.read("route/preferred_clearance_m", f.route.preferred_clearance_m);
+  r.read("route/avoid_weight", f.route.avoid_weight);
   r.read("route/clearance_weight", f.route.clearance_weight);
   r.read("route/heuristic_weight", f.route.heuristic_weight);
   r.read("route/min_z_m", f.route.min_z_m);

@@ -202,6 +202,9 @@ bool ReplanFsm::Config::validate(std::string* why) const {
   if (max_look_holds < 1) return bad("max_look_holds must be >= 1");
   if (!(backoff_speed_mps > 0.0) || !std::isfinite(backoff_speed_mps)) return bad("backoff_speed_mps must be positive");
   if (!(mission_timeout_s >= 0.0) || std::isnan(mission_timeout_s)) return bad("mission_timeout_s must be >= 0 (0: automatic)");
+  if (!(progress_timeout_s >= 0.0) || std::isnan(progress_timeout_s)) return bad("progress_timeout_s must be >= 0 (0: off)");
+  if (!(progress_min_gain_m > 0.0) || !std::isfinite(progress_min_gain_m)) return bad("progress_min_gain_m must be positive");
+  if (!(stall_zone_radius_m >= 0.0) || !(stall_zone_radius_m <= 10.0)) return bad("stall_zone_radius_m must be in [0, 10]");
   if (!(known_start_radius_m >= 0.0) || !(known_start_radius_m <= 2.0)) return bad("known_start_radius_m must be in [0, 2]");
   if (!(commit_margin_m >= 0.0) || !(commit_margin_m <= 5.0)) return bad("commit_margin_m must be in [0, 5]");
   if (!(depth_timeout_s >= 0.0) || !std::isfinite(depth_timeout_s)) return bad("depth_timeout_s must be >= 0 (0: not required)");
@@ -515,6 +518,8 @@ void ReplanFsm::observeClockLocked(double now, FsmOutput* out) {
   if (server_) shiftOld(&server_->stamp_s);
   shiftOld(&server_anchor_s_);
   last_progress_s_ += shift;  // read from this clock
+  progress_.shift(shift);
+  progress_tick_s_ += shift;
   last_clock_s_ = now;
   ++time_jumps_;
   time_jumped_ = true;
@@ -710,7 +715,14 @@ ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::s
   return brake;
 }
 
-bool ReplanFsm::committable(const EsdfMap& map, const Eigen::Vector3d& p) const {
+double ReplanFsm::bandExcess(double z) const {
+  return std::max({0.0, config_.route.min_z_m - z, z - config_.route.max_z_m});
+}
+
+bool ReplanFsm::committable(const EsdfMap& map, const Eigen::Vector3d& p, double start_excess) const {
+  // The height band (route/min_z_m, max_z_m, a geofence): no farther out of it than the plan's start
+  // (a take-off from below the band climbs into it; a plan from inside stays inside).
+  if (bandExcess(p.z()) > start_excess + 1e-3) return false;
   // Only around a hover the planner did not fly to (a mission's start, a re-anchoring): around any
   // plan's start, each plan would commit known_start_radius_m further into unobserved space (a
   // creep at a metre per second into space the camera cannot see, e.g. above or below it).
@@ -739,6 +751,7 @@ bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const 
   const double T = plan.duration(), dt = config_.safety_sample_s;
   const UniformBspline vel = plan.derivative();
   const Eigen::Vector3d start = plan.evaluate(0.0);
+  const double start_excess = bandExcess(start.z());
   const UniformBspline acc = vel.derivative();
   std::vector<double> taus, arc, speed, along;  // along: the acceleration along the path
   double blocked_s = -1.0;
@@ -749,7 +762,7 @@ bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const 
     prev = p;
     // (Not where the vehicle is: the start, and a hold there. After an odometry jump, or beside space
     // that became unknown when the window scrolled, it holds and looks instead of failing every plan.)
-    if ((p - start).norm() > 1e-6 && !committable(map, p)) {
+    if ((p - start).norm() > 1e-6 && !committable(map, p, start_excess)) {
       blocked_s = s;
       break;
     }
@@ -824,7 +837,7 @@ bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const 
     cut = true;
     for (double tau = 0.0;; tau = std::min(D, tau + dt)) {
       const Eigen::Vector3d q = traj->spline.evaluate(tau);
-      if ((q - start).norm() > 1e-6 && !committable(map, q)) {
+      if ((q - start).norm() > 1e-6 && !committable(map, q, start_excess)) {
         *why = "known-space commitment: the cut trajectory leaves the known free space " + std::to_string(tau) +
                " s after its start";
         cut = false;
@@ -999,6 +1012,114 @@ std::optional<ExecTrajectory> ReplanFsm::restToRestLocked(const std::vector<Eige
   return escape;
 }
 
+void ReplanFsm::startManoeuvreLocked(ExecTrajectory manoeuvre, bool backoff, FsmEvent* event, FsmOutput* out,
+                                     const std::string& why) {
+  if (backoff) {
+    ++backoffs_;
+    look_holds_ = 0;
+    // The way back is used up: a later back-off goes on from where this one ends.
+    const Eigen::Vector3d end = manoeuvre.spline.evaluate(manoeuvre.spline.duration());
+    while (!flown_.empty() && (flown_.back() - end).norm() > 0.3) flown_.pop_back();
+  }
+  manoeuvre.id = next_id_++;
+  replaceCurrentLocked(manoeuvre);
+  consecutive_failures_ = 0;  // a new start: the tries after it are counted anew
+  failures_at_reroute_ = 0;
+  route_stale_ = true;        // searched again from where it ends
+  ++route_epoch_;
+  collision_ahead_ = false;
+  event->published = true;
+  event->fallback = backoff ? "back_off" : "escape";
+  out->trajectory = manoeuvre;
+  setState(FsmState::kEmergencyStop, out, why);
+}
+
+bool ReplanFsm::handleStallLocked(double t, const EsdfMap& map, FsmOutput* out) {
+  if (!config_.global_route || !(config_.progress_timeout_s > 0.0) || !progress_.active() || goals_.empty())
+    return false;
+  const FlatState here = takeoverStateLocked(t);
+  progress_.update(t, here.position);
+  progress_tick_s_ = t;
+  if (progress_.lastGain() != stall_gain_s_) {  // progress: the remedies start over
+    stall_gain_s_ = progress_.lastGain();
+    stalls_ = 0;
+  }
+  const bool at_rest = (!current_ || t >= current_->endTime()) && odom_velocity_.norm() < config_.stopped_speed_mps;
+  FsmEvent event;
+  event.trigger = FsmEvent::Trigger::kReroute;
+  event.state = state_;
+  event.status = ReplanStatus::kSuccess;
+  event.position = here.position;
+  std::string report;
+  // A stop begun as a remedy has ended: back off from there.
+  if (backoff_when_stopped_ && state_ == FsmState::kEmergencyStop && at_rest) {
+    backoff_when_stopped_ = false;
+    std::optional<ExecTrajectory> backoff = backoffTrajectoryLocked(t, map, &report);
+    if (backoff) {
+      event.message = "no progress: " + report;
+      startManoeuvreLocked(*backoff, true, &event, out, report);
+      out->event = event;
+      return true;
+    }
+    // None: the stopped vehicle plans anew from where it is (EMERGENCY_STOP's own rule).
+    if (!out->message.empty()) out->message += "; ";
+    out->message += report;
+    return false;
+  }
+  const double since = progress_.sinceGain(t);
+  char text[200];
+  std::snprintf(text, sizeof(text), "no progress towards the goal for %.0f s (%.1f m left, %.1f m when it last gained)",
+                since, progress_.remaining(), progress_.best());
+  if (since > mission_limit_s_) {
+    char limit[220];
+    std::snprintf(limit, sizeof(limit),
+                  "no progress towards the goal for the mission's time limit of %.0f s (%.1f m left, %.1f m when it "
+                  "last gained)", mission_limit_s_, progress_.remaining(), progress_.best());
+    giveUpLocked(t, map, GoalStatus::kGivenUp, ReplanStatus::kSuccess, limit, out);
+    return true;
+  }
+  const bool manoeuvring = current_ && current_->manoeuvre() && t < current_->endTime();
+  if (since < (stalls_ + 1) * config_.progress_timeout_s || manoeuvring || goals_pending_ || backoff_when_stopped_)
+    return false;
+  // A stall: the next remedy. Every one marks the place for the route searches to avoid.
+  ++stalls_;
+  // The zone lies ahead along the way, where the vehicle was heading (one around the vehicle alone
+  // weighs on every way out of it alike).
+  if (config_.stall_zone_radius_m > 0.0)
+    stall_zones_.push_back({progress_.ahead(config_.stall_zone_radius_m), config_.stall_zone_radius_m});
+  route_stale_ = true;
+  event.message = text;
+  if (stalls_ % 2 == 0 && backoffs_ < config_.max_backoffs) {
+    if (!at_rest) {
+      // Stop first (the back-off starts from rest), then back off (above).
+      emergencyStopLocked(t, map, std::string(text) + ": stopping to back off", out, nullptr, ReplanStatus::kSuccess);
+      out->event->trigger = FsmEvent::Trigger::kReroute;
+      backoff_when_stopped_ = true;
+      return true;
+    }
+    std::optional<ExecTrajectory> backoff = backoffTrajectoryLocked(t, map, &report);
+    if (backoff) {
+      event.message += "; " + report;
+      startManoeuvreLocked(*backoff, true, &event, out, report);
+      out->event = event;
+      return true;
+    }
+    event.message += "; " + report;
+  }
+  // Re-route from where the vehicle is (at the next tick), around the places it stalled at.
+  if (state_ == FsmState::kExecTraj || state_ == FsmState::kReplanTraj) {
+    pending_goals_ = remainingGoalsLocked();
+    goals_pending_ = !pending_goals_.empty();
+    rerouting_ = goals_pending_;
+  }
+  event.fallback = "reroute";
+  event.message += "; re-routing around where it stalled";
+  out->event = event;
+  if (!out->message.empty()) out->message += "; ";
+  out->message += event.message;
+  return true;
+}
+
 void ReplanFsm::giveUpLocked(double t, const EsdfMap& map, GoalStatus status, ReplanStatus replan_status,
                              const std::string& why, FsmOutput* out) {
   const std::string reason = "mission given up: " + why;
@@ -1011,6 +1132,8 @@ void ReplanFsm::giveUpLocked(double t, const EsdfMap& map, GoalStatus status, Re
   route_.clear();
   route_goals_.clear();
   consecutive_failures_ = 0;
+  progress_.clear();
+  backoff_when_stopped_ = false;
   const bool moving = current_ && !current_->braking && t < current_->endTime();
   if (moving) {
     // A controlled stop along the current path (an escape or back-off under way is cut short too);
@@ -1052,6 +1175,10 @@ void ReplanFsm::routeLocked(double t, const EsdfMap& map, std::unique_lock<std::
   const uint64_t epoch = route_epoch_;
   const bool rerouting = rerouting_;
 
+  // The places this mission stalled at weigh against a way through them (set here: the routers are
+  // tick()'s, and replaced by a reconfiguration).
+  router_->setAvoided(stall_zones_);
+  start_router_->setAvoided(stall_zones_);
   // The search, with the mutex released: the safety thread and the inputs go on meanwhile.
   lock->unlock();
   Path route{start};
@@ -1164,12 +1291,22 @@ bool ReplanFsm::startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out) {
     return refuse(GoalStatus::kReferenceFailed, std::string("minimum-snap reference: ") + toString(status));
   goals_ = goals;
   next_goal_ = 0;
-  if (new_mission_) {
-    new_mission_ = false;
+  const bool new_mission = std::exchange(new_mission_, false);
+  if (new_mission) {
     last_progress_s_ = t;
     mission_limit_s_ = config_.mission_timeout_s > 0.0 ? config_.mission_timeout_s : std::max(60.0, 4.0 * ref.duration());
     backoffs_ = 0;
+    MissionProgress::Config progress;
+    progress.min_gain_m = config_.progress_min_gain_m;
+    progress_ = MissionProgress(progress);
+    stalls_ = 0;
+    stall_zones_.clear();
+    backoff_when_stopped_ = false;
   }
+  // The distance left is measured along the way the reference takes; a rebuilt one re-bases it.
+  progress_.reset(waypoints, t, start.position, !new_mission);
+  stall_gain_s_ = progress_.lastGain();
+  progress_tick_s_ = t;
   reference_ = std::move(ref);
   last_goal_status_ = GoalStatus::kAccepted;
   out->new_reference = true;
@@ -1271,23 +1408,9 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
       return;
     }
     if (backoff) {
-      ++backoffs_;
-      look_holds_ = 0;
-      const Eigen::Vector3d end = backoff->spline.evaluate(backoff->spline.duration());
-      while (!flown_.empty() && (flown_.back() - end).norm() > 0.3) flown_.pop_back();
-      backoff->id = next_id_++;
-      replaceCurrentLocked(*backoff);
-      route_stale_ = true;
-      ++route_epoch_;
-      collision_ahead_ = false;
-      consecutive_failures_ = 0;
-      failures_at_reroute_ = 0;
-      event.published = true;
-      event.fallback = "back_off";
       event.message += (event.message.empty() ? "" : "; ") + std::string("held at the edge of the known space ") +
                        std::to_string(config_.max_look_holds) + " times; " + backoff_report;
-      out->trajectory = *backoff;
-      setState(FsmState::kEmergencyStop, out, backoff_report);
+      startManoeuvreLocked(*backoff, true, &event, out, backoff_report);
       out->event = event;
       out->plan = std::move(result);
       return;
@@ -1344,12 +1467,6 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
       escape = backoffTrajectoryLocked(t, map, &report);
       backoff = escape.has_value();
       escape_report += (escape_report.empty() ? "" : "; ") + report;
-      if (backoff) {
-        ++backoffs_;
-        // The way back is used up: a later back-off goes on from where this one ends.
-        const Eigen::Vector3d end = escape->spline.evaluate(escape->spline.duration());
-        while (!flown_.empty() && (flown_.back() - end).norm() > 0.3) flown_.pop_back();
-      }
     }
     if (!escape && !escape_report.empty()) event.message += "; " + escape_report;
     // The way looks blocked (no guide path, no free local goal) or plans keep failing: re-route.
@@ -1369,18 +1486,8 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
       }
     }
     if (escape) {
-      escape->id = next_id_++;
-      replaceCurrentLocked(*escape);
-      consecutive_failures_ = 0;  // the escape is a new start: the tries after it are counted anew
-      failures_at_reroute_ = 0;
-      route_stale_ = true;
-      ++route_epoch_;
-      collision_ahead_ = false;
-      event.published = true;
-      event.fallback = backoff ? "back_off" : "escape";
       event.message += "; " + escape_report;
-      out->trajectory = *escape;
-      setState(FsmState::kEmergencyStop, out, escape_report);
+      startManoeuvreLocked(*escape, backoff, &event, out, escape_report);
     } else if (giving_up) {
       giveUpLocked(t, map, GoalStatus::kGivenUp, result.status, give_up_why, out);
       event.published = out->trajectory.has_value();  // the stop of a moving vehicle
@@ -1406,6 +1513,9 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
   // Nothing is planned on stale inputs (checkSafety() brakes a moving vehicle); goals wait.
   std::string stale;
   if (state_ != FsmState::kInit && !inputsFreshLocked(t, &stale)) {
+    // Nothing is planned: no stall (the progress clock pauses).
+    if (progress_.active() && std::isfinite(progress_tick_s_) && t > progress_tick_s_) progress_.shift(t - progress_tick_s_);
+    progress_tick_s_ = t;
     if (goals_pending_ && state_ == FsmState::kWaitTarget) {
       goals_pending_ = false;
       last_goal_status_ = GoalStatus::kInputsStale;
@@ -1436,6 +1546,7 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
     if (flown_.empty() || (p - flown_.back()).norm() >= 0.25) flown_.push_back(p);
     if (flown_.size() > 200) flown_.erase(flown_.begin(), flown_.begin() + 100);
   }
+  if (handleStallLocked(t, map, &out)) return out;
   if (config_.global_route) {
     const FsmState before = state_;
     double searched_until = NAN;
@@ -1480,6 +1591,7 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
           out.goal_reached = true;
           goals_.clear();  // done: a later stop (e.g. an odometry jump at the hover) flies nowhere
           next_goal_ = 0;
+          progress_.clear();
           setState(FsmState::kWaitTarget, &out, "goal reached");
         }
         break;

@@ -55,6 +55,7 @@ class GlobalRouter {
     double end_clearance_m = 0.1;          ///< ... down to this clearance [m]
     int max_expansions = 1500000;          ///< budget
     int shortcut_lookahead = 24;           ///< shortening: raw points tried past the last visible one
+    double avoid_weight = 4.0;             ///< entering a cell in an avoided zone costs 1 + this times more; >= 0
 
     bool validate(std::string* why) const;
   };
@@ -68,11 +69,24 @@ class GlobalRouter {
 
   explicit GlobalRouter(const Config& config) : config_(config) {}
   const Config& config() const { return config_; }
+  /// A place the route keeps away from where it can (the FSM's stalls: where the vehicle made no
+  /// progress along an earlier route): a cell whose best voxel lies within radius_m of center costs
+  /// 1 + avoid_weight times more to enter, and the shortening takes no shortcut that crosses a zone
+  /// between two points outside it. The zones only weigh: they never block, so kNoPath still proves
+  /// the goal unreachable.
+  struct Zone {
+    Eigen::Vector3d center = Eigen::Vector3d::Zero();
+    double radius_m = 0.0;
+  };
+  /// The zones of the following searches (non-finite ones are dropped).
+  void setAvoided(const std::vector<Zone>& zones);
+  const std::vector<Zone>& avoided() const { return avoided_; }
   /// A route from start to goal; see the class comment for the statuses.
   Result route(const EsdfMap& map, const Eigen::Vector3d& start, const Eigen::Vector3d& goal);
 
  private:
   Config config_;
+  std::vector<Zone> avoided_;
   std::vector<float> g_;
   std::vector<int32_t> parent_;
   std::vector<uint32_t> stamp_;       // open: generation; closed: generation | top bit

@@ -48,7 +48,15 @@
 // strategy: re-route (above), and after max_plan_failures failed plans, or when it cannot start
 // and no escape up the distance field exists, or when its plans have been cut to a hold at the same
 // place max_look_holds times (the way on lies in unknown space the camera does not see by turning),
-// back off along the flown path (at most max_backoffs times per mission) and re-route from there. Without global_route, the mission is given up after
+// back off along the flown path (at most max_backoffs times per mission) and re-route from there.
+// Stalls with every plan succeeding (hovering at the edge of the known space, creeping, shuttling)
+// are caught by progress, not by failures: the distance left along the mission's way
+// (MissionProgress) must shrink by progress_min_gain_m within progress_timeout_s; each time it does
+// not, the FSM marks the place (a zone the route searches avoid, GlobalRouter::setAvoided) and
+// re-routes from where the vehicle is, or, every second time while back-offs are left, stops and
+// backs off; the mission is given up when it has made no progress for its time limit (event
+// fallback "reroute" / "back_off" / "give_up", the distance left in the message). The clock pauses
+// while the inputs are stale. Without global_route, the mission is given up after
 // max_plan_failures failed first plans.
 //
 // Known-space commitment (commit_to_known_space, FASTER's safe/committed split done along the
@@ -60,7 +68,9 @@
 // view, would pass on distance alone), or comes within safety_clearance_m of an obstacle; from the last such instant
 // (brake_start_s) the published trajectory brakes along the same path to rest. So at every instant
 // of every published trajectory the vehicle can stop, at the planning deceleration, in space the
-// map has observed free; if no later plan comes, it does stop there. A new plan takes over before
+// map has observed free; if no later plan comes, it does stop there. The height band of the route
+// (route.min_z_m, max_z_m) is a geofence for the committed part too: no farther out of it than the
+// plan's start (a take-off from below climbs in; a plan from inside stays inside). A new plan takes over before
 // the braking starts while the map keeps growing ahead (the FSM replans early enough), so normal
 // flight does not slow down; it slows where the camera has not seen far enough.
 //
@@ -106,6 +116,7 @@
 #include <vector>
 
 #include "topo_planner/path_searching/global_router.h"
+#include "topo_planner/topo_replan/mission_progress.h"
 #include "topo_planner/topo_replan/topo_replanner.h"
 
 namespace topo_planner {
@@ -160,7 +171,8 @@ struct FsmEvent {
   FsmState state = FsmState::kInit;     ///< state when it started
   bool published = false;               ///< a new trajectory was returned
   ReplanStatus status = ReplanStatus::kSuccess;
-  /// none | keep_current | hover_retry | stop | escape | back_off | give_up | discarded_late | discarded_superseded
+  /// none | keep_current | hover_retry | stop | escape | back_off | reroute | give_up | discarded_late |
+  /// discarded_superseded
   std::string fallback = "none";
   std::string message;
   Eigen::Vector3d position = Eigen::Vector3d::Zero();  ///< start of the planned trajectory
@@ -266,6 +278,17 @@ class ReplanFsm {
     /// A mission with no successful plan for this long (since it started or since its last one) is
     /// given up [s]; 0: 60 s or 4 times the duration of its first reference, whichever is longer.
     double mission_timeout_s = 0.0;
+    /// Progress (MissionProgress): the distance left along the mission's way must shrink by
+    /// progress_min_gain_m within progress_timeout_s, whether plans succeed or not. Each time it does
+    /// not (a stall: hovering at the edge of the known space, creeping, shuttling), the FSM changes
+    /// strategy: first a re-route from where the vehicle is, then a back-off along the flown path
+    /// (stopping first when moving), alternating while back-offs are left; the mission is given up
+    /// when it has made no progress for its time limit. 0: off [s].
+    double progress_timeout_s = 10.0;
+    double progress_min_gain_m = 0.5;  ///< [m]
+    /// Each stall adds a zone of this radius around where the vehicle was to the mission's route
+    /// searches (GlobalRouter::setAvoided): the re-route prefers another way [m].
+    double stall_zone_radius_m = 1.5;
     /// A plan whose start velocity differs from the commanded one by more than this (the replanner
     /// could not restore it after time reallocation) is not published: setpoints never step [m/s].
     double max_start_velocity_step_mps = 0.1;
@@ -353,7 +376,10 @@ class ReplanFsm {
   /// around it), at least safety_clearance_m from obstacles, and every voxel within
   /// safety_clearance_m of it observed (or within known_start_radius_m + safety_clearance_m of the
   /// known anchor); or within known_start_radius_m of the known anchor (known_anchor_).
-  bool committable(const EsdfMap& map, const Eigen::Vector3d& p) const;
+  /// And not farther out of the height band (route.min_z_m, max_z_m) than start_excess.
+  bool committable(const EsdfMap& map, const Eigen::Vector3d& p, double start_excess) const;
+  /// How far z lies outside the height band [m]; 0 inside.
+  double bandExcess(double z) const;
   /// The known-space commitment of a plan starting at t0 (see the class comment): fills traj->spline,
   /// brake_start_s, stops_before_unknown and the heading target; false (with why) when the cut
   /// trajectory cannot be built or fails its check.
@@ -385,6 +411,13 @@ class ReplanFsm {
   /// *searched_until: the clock (now(), or t) when a search ended; untouched when none ran.
   void routeLocked(double t, const EsdfMap& map, std::unique_lock<std::mutex>* lock, FsmOutput* out,
                    const std::function<double()>& now, double* searched_until);
+  /// The stall rule (Config::progress_timeout_s), once per tick before the state machine: true when
+  /// it acted (re-route, stop, back-off or give-up) and the tick ends there.
+  bool handleStallLocked(double t, const EsdfMap& map, FsmOutput* out);
+  /// Publishes a back-off (or escape) manoeuvre: the way back is used up, the route is searched
+  /// again from where it ends, EMERGENCY_STOP until it has been flown.
+  void startManoeuvreLocked(ExecTrajectory manoeuvre, bool backoff, FsmEvent* event, FsmOutput* out,
+                            const std::string& why);
   /// Ends the mission for `why` (braking first when moving), with a give_up event.
   void giveUpLocked(double t, const EsdfMap& map, GoalStatus status, ReplanStatus replan_status, const std::string& why,
                     FsmOutput* out);
@@ -449,6 +482,12 @@ class ReplanFsm {
   double last_progress_s_ = 0.0;          // the mission's start or its last successful plan (not a hold) [s]
   uint64_t route_epoch_ = 0;              // bumped by setGoals, stops and odometry jumps: a route searched before is stale
   double mission_limit_s_ = INFINITY;
+  MissionProgress progress_;              // the distance left along the mission's way
+  int stalls_ = 0;                        // stall remedies since the last gain of progress
+  double stall_gain_s_ = 0.0;             // progress_.lastGain() when stalls_ was last reset
+  bool backoff_when_stopped_ = false;     // a stall remedy: back off once the stop it began has ended
+  double progress_tick_s_ = NAN;          // the last tick that measured progress (or paused it) [s]
+  std::vector<GlobalRouter::Zone> stall_zones_;  // where this mission stalled: its route searches avoid them
   double takeover_delay_s_;       // the adaptive takeover delay (tick() only writes it, under the mutex)
 };
 
