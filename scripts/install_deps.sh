@@ -17,6 +17,7 @@ PACKAGES=(
   libdiagnostic-updater-dev libdiagnostic-msgs-dev  # /diagnostics of the mapping and the planner
   libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure  # the planner's limits at run time
   rviz
+  python3-rosbag  # planner.launch record:=true, the record-and-replay check
   # algorithms and maps
   libeigen3-dev libnlopt-cxx-dev liboctomap-dev libdynamicedt3d-dev libpcl-dev libopencv-dev
   # headless demo and figures
