@@ -144,27 +144,22 @@ void PlannerServer::positionCmdCallback(const PositionCommandConstPtr& msg) {
 }
 
 void PlannerServer::goalCallback(const geometry_msgs::PoseStampedConstPtr& msg) {
-  if (!msg->header.frame_id.empty() && msg->header.frame_id != config_.frame_id) {
-    ROS_WARN("planner: goal in frame '%s' ignored (expected '%s')", msg->header.frame_id.c_str(),
-             config_.frame_id.c_str());
+  Eigen::Vector3d goal;
+  std::string why;
+  if (!goalFromMsg(*msg, config_.frame_id, config_.goal_height_m, &goal, &why)) {
+    ROS_WARN("planner: 2D Nav Goal ignored: %s", why.c_str());
     return;
   }
-  submitGoals({Eigen::Vector3d(msg->pose.position.x, msg->pose.position.y, config_.goal_height_m)}, "2D Nav Goal");
+  submitGoals({goal}, "2D Nav Goal");
 }
 
 void PlannerServer::waypointsCallback(const nav_msgs::PathConstPtr& msg) {
-  if (!msg->header.frame_id.empty() && msg->header.frame_id != config_.frame_id) {
-    ROS_WARN("planner: waypoints in frame '%s' ignored (expected '%s')", msg->header.frame_id.c_str(),
-             config_.frame_id.c_str());
-    return;
-  }
-  if (msg->poses.size() > 1000) {
-    ROS_WARN("planner: %zu waypoints refused (at most 1000)", msg->poses.size());
-    return;
-  }
   std::vector<Eigen::Vector3d> goals;
-  for (const auto& pose : msg->poses)
-    goals.emplace_back(pose.pose.position.x, pose.pose.position.y, pose.pose.position.z);
+  std::string why;
+  if (!goalsFromMsg(*msg, config_.frame_id, &goals, &why)) {
+    ROS_WARN("planner: waypoints ignored: %s", why.c_str());
+    return;
+  }
   submitGoals(goals, "waypoints");
 }
 
