@@ -141,15 +141,19 @@ MapInsertStats insertMapFile(const MapFile& file, OccupancyMap* map) {
     for (const MapCell& cell : file.cells) {
       if (cell.occupied != occupied_pass) continue;
       // Voxels whose centre lies in [center - size/2, center + size/2).
+      // The index range in doubles first: a file's coordinates may lie far beyond the int range of
+      // voxel indices (casting those is undefined), so the range is clipped to the window before.
       const Eigen::Vector3d h = Eigen::Vector3d::Constant(0.5 * cell.size_m);
-      Eigen::Vector3i lo = (((cell.center - h) * g.inverseResolution()).array() - 0.5).ceil().cast<int>();
-      Eigen::Vector3i hi = (((cell.center + h) * g.inverseResolution()).array() - (0.5 + 1e-9)).floor().cast<int>();
-      const Eigen::Vector3i own = g.indexOf(cell.center);
+      Eigen::Array3d lo = (((cell.center - h) * g.inverseResolution()).array() - 0.5).ceil();
+      Eigen::Array3d hi = (((cell.center + h) * g.inverseResolution()).array() - (0.5 + 1e-9)).floor();
+      const Eigen::Array3d own = (cell.center * g.inverseResolution()).array().floor();
       for (int a = 0; a < 3; ++a)
         if (lo[a] > hi[a]) lo[a] = hi[a] = own[a];
-      const VoxelBox box = VoxelBox::fromCorners(lo, hi);
-      const VoxelBox inside = box.intersection(window);
-      if (!(inside == box)) ++stats.clipped_cells;
+      const Eigen::Array3d wmin = window.min.cast<double>().array(), wmax = window.max.cast<double>().array();
+      const bool clipped = (lo < wmin).any() || (hi > wmax).any();
+      if (clipped) ++stats.clipped_cells;
+      if ((hi < wmin).any() || (lo > wmax).any() || !(lo.allFinite() && hi.allFinite())) continue;
+      const VoxelBox inside = VoxelBox::fromCorners(lo.max(wmin).cast<int>().matrix(), hi.min(wmax).cast<int>().matrix());
       if (inside.empty()) continue;
       Eigen::Vector3i i;
       for (i.z() = inside.min.z(); i.z() <= inside.max.z(); ++i.z())
