@@ -55,7 +55,7 @@ for t in $targets; do
   rows+=("$(printf '| %-16s | %8s | %10s | %6s | %6s | %6s | %7s |' "$t" "${eps:-?}" "${execs:-?}" "${cov:-?}" "${ft:-?}" "$corp" "$crashes")")
   if [ "$crashes" -gt 0 ]; then
     echo "fuzz: $t FAILED: inputs in $dir/crashes/, report at the end of $dir/fuzz.log"
-    grep -m3 -E 'ERROR: |runtime error|fuzz property violated' "$dir/fuzz.log"
+    grep -a -m3 -E 'ERROR: AddressSanitizer|ERROR: libFuzzer|runtime error|fuzz property violated' "$dir/fuzz.log"
   fi
 done
 echo
