@@ -127,7 +127,8 @@ visualization_msgs::Marker lineStrip(const UniformBspline& spline, double dt_s, 
   m.color.r = r, m.color.g = g, m.color.b = b, m.color.a = a;
   if (!spline.isValid()) return m;
   const double T = spline.duration();
-  const int n = std::min(5000, std::max(2, int(std::ceil(T / dt_s)) + 1));
+  // The count capped in doubles: T / dt_s may exceed the int range.
+  const int n = int(std::min(5000.0, std::max(2.0, std::ceil(T / dt_s) + 1.0)));
   for (int k = 0; k < n; ++k) {
     const Eigen::Vector3d p = spline.evaluate(T * k / (n - 1));
     geometry_msgs::Point pt;
