@@ -221,10 +221,11 @@ int main(int argc, char** argv) {
   writeFile(corpus / "trajectory_msgs" / "goal", {1, 0});
   writeFile(corpus / "trajectory_msgs" / "path", {2, 0});
 
-  // Default configs of the three kinds, and one map of 0.1 m voxels.
+  // Default configs of the four kinds, and one map of 0.1 m voxels.
   writeFile(corpus / "params" / "mapping_defaults", {0});
   writeFile(corpus / "params" / "planner_defaults", {1});
   writeFile(corpus / "params" / "setpoints_defaults", {2});
+  writeFile(corpus / "params" / "planner_node_defaults", {3});
   {
     fuzz::FuzzOutput o;
     o.byte(0);

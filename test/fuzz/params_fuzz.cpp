@@ -5,11 +5,17 @@
 //     (OccupancyMap::create, EsdfMap::create, the slice height inside the window, a full ESDF);
 //   ReplanFsm::Config (readPlannerParams' fsm/, replan/, search/, optimizer/, route/): validate, then
 //     ReplanFsm::create;
-//   SetpointGenerator::Config (the trajectory server): validate.
+//   SetpointGenerator::Config (the trajectory server): validate;
+//   PlannerSettings (readPlannerParams' own fields): validate, then the planner node's timers
+//   (ros::Duration of the periods) and trajectory markers (lineStrip at vis_sample_s).
 // The property: a config validate() accepts builds its objects without crashing, and within
 // max_memory_mb (kept small here, so that a memory bug shows up against the fuzzer's RSS limit).
+#include <ros/time.h>
+
 #include "fuzz_input.h"
 #include "topo_planner/plan_manage/mapping_server.h"
+#include "topo_planner/plan_manage/planner_settings.h"
+#include "topo_planner/plan_manage/trajectory_conversions.h"
 #include "topo_planner/topo_replan/replan_fsm.h"
 #include "topo_planner/topo_replan/setpoint_generator.h"
 
@@ -176,14 +182,44 @@ void fuzzSetpoints(FuzzInput& in) {
   if (!s.validate(&why)) TOPO_PLANNER_FUZZ_CHECK(!why.empty());
 }
 
+void fuzzPlannerNode(FuzzInput& in) {
+  using namespace topo_planner;
+  PlannerSettings c;
+  c.goal_height_m = in.number(c.goal_height_m);
+  c.plan_period_s = in.number(c.plan_period_s);
+  c.safety_period_s = in.number(c.safety_period_s);
+  c.vis_sample_s = in.number(c.vis_sample_s);
+  c.reference_speed_ratio = in.number(c.reference_speed_ratio);
+  const int goals = in.byte() % 4;
+  for (int i = 0; i < goals; ++i) c.goals.emplace_back(in.number(1.0), in.number(1.0), in.number(1.0));
+  std::string why;
+  if (!c.validate(&why)) {
+    TOPO_PLANNER_FUZZ_CHECK(!why.empty());
+    return;
+  }
+  // PlannerServer::create's timers (ros::Duration throws beyond its 32-bit seconds).
+  TOPO_PLANNER_FUZZ_CHECK(ros::Duration(c.plan_period_s).toSec() > 0.0);
+  TOPO_PLANNER_FUZZ_CHECK(ros::Duration(c.safety_period_s).toSec() > 0.0);
+  // The trajectory markers, over a trajectory of up to a day (a long mission's reference).
+  const double knot_span_s = std::min(std::abs(in.number(0.1)), 8640.0);
+  if (!(knot_span_s > 0.0)) return;
+  const UniformBspline spline = UniformBspline::straightLine(Eigen::Vector3d::Zero(), Eigen::Vector3d(1.0, 2.0, 3.0),
+                                                             16, 3, knot_span_s);
+  const visualization_msgs::Marker strip = lineStrip(spline, c.vis_sample_s, "world", "trajectory", 0, 0.1, 1, 1, 1);
+  TOPO_PLANNER_FUZZ_CHECK(strip.points.size() >= 2 && strip.points.size() <= 5000);
+}
+
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  static const bool time_initialised = (ros::Time::init(), true);  // lineStrip stamps with ros::Time::now()
+  (void)time_initialised;
   FuzzInput in(data, size);
-  switch (in.byte() % 3) {
+  switch (in.byte() % 4) {
     case 0: fuzzMapping(in); break;
     case 1: fuzzPlanner(in); break;
-    default: fuzzSetpoints(in); break;
+    case 2: fuzzSetpoints(in); break;
+    default: fuzzPlannerNode(in); break;
   }
   return 0;
 }
