@@ -6,7 +6,7 @@ WS := $(ROOT)/build/ws
 CATKIN_ARGS := -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=Release
 BIN = $(1)/devel/lib/topo_planner
 
-.PHONY: deps build test bench bench-env bench-topo bench-opt bench-replan bench-forest-gen bench-camera bench-flight bench-flight-forests bench-faults demo map-demo test-asan test-tsan clean
+.PHONY: deps build test bench bench-env bench-topo bench-opt bench-replan bench-forest-gen bench-camera bench-flight bench-flight-forests bench-faults demo map-demo test-asan test-tsan fuzz clean
 
 deps:
 	@bash scripts/install_deps.sh
@@ -108,6 +108,13 @@ test-tsan: deps
 	  catkin_make -j$(JOBS) -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
 	  -DTOPO_PLANNER_SANITIZE=thread run_tests
 	@/usr/bin/python3 scripts/test_summary.py $(ROOT)/build/ws_tsan/build/test_results
+
+# libFuzzer harnesses of test/fuzz (clang-14, ASan + UBSan, build/ws_fuzz): each for FUZZ_S seconds on
+# a copy of its corpus; a table (execs/s, coverage, corpus, crashes) and a RESULT line; non-zero exit
+# on a crash (its input in build/fuzz/<name>/crashes/). FUZZ_TARGETS="pcd params" picks harnesses.
+FUZZ_S ?= 60
+fuzz: deps
+	FUZZ_S=$(FUZZ_S) FUZZ_JOBS=$(JOBS) bash scripts/fuzz.sh
 
 clean:
 	rm -rf build

@@ -4,9 +4,16 @@
 #include <pcl/io/pcd_io.h>
 #include <pcl/point_types.h>
 
+#include <bitset>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <fstream>
+#include <iterator>
+#include <limits>
 #include <memory>
+#include <sstream>
+#include <vector>
 
 namespace topo_planner {
 
@@ -44,6 +51,131 @@ MapStatus fail(MapStatus s, const std::string& msg, std::string* error) {
   return s;
 }
 
+// OctoMap's node readers (OcTreeBaseImpl::readNodesRecurs for .ot, OccupancyOcTreeBase::
+// readBinaryNode for .bt) recurse once per inner node and never check the stream: child flags that
+// claim inner nodes below the tree depth, or a file that ends inside the node stream (the reader
+// then decodes bytes it never read), recurse until the stack overflows. So the file is parsed here
+// first, without recursion: the header as octomap reads it, then the node stream walked with an
+// explicit stack, bounded by the tree depth and by the bytes present. Only a stream that passes is
+// handed to octomap, and only those bytes.
+struct OctomapHeader {
+  std::string id;
+  unsigned size = 0;        ///< nodes in the stream (0: no stream)
+  double resolution = 0.0;  ///< [m]
+  size_t data_begin = 0;    ///< offset of the node stream in the file
+};
+
+const char kBinaryFirstLine[] = "# Octomap OcTree binary file";  // .bt (AbstractOccupancyOcTree)
+const char kFullFirstLine[] = "# Octomap OcTree file";           // .ot (AbstractOcTree)
+
+// The header of .bt/.ot files: a first line, then keyword lines ("id", "size", "res", "#" comments,
+// unknown keywords skipped to the end of the line) up to "data" and the end of its line. A .bt
+// file may instead start with the legacy binary header (int32 3, double resolution, uint32 size).
+bool parseOctomapHeader(const std::string& bytes, bool binary, OctomapHeader* h, std::string* why) {
+  std::istringstream s(bytes);
+  std::string line;
+  std::getline(s, line);
+  const std::string first = binary ? kBinaryFirstLine : kFullFirstLine;
+  if (line.compare(0, first.size(), first) != 0) {
+    int32_t type = 0;
+    if (!binary || bytes.size() < sizeof(type) + sizeof(h->resolution) + sizeof(h->size)) {
+      *why = "does not start with '" + first + "'";
+      return false;
+    }
+    std::memcpy(&type, bytes.data(), sizeof(type));
+    std::memcpy(&h->resolution, bytes.data() + sizeof(type), sizeof(h->resolution));
+    std::memcpy(&h->size, bytes.data() + sizeof(type) + sizeof(h->resolution), sizeof(h->size));
+    if (type != 3) {
+      *why = "has neither an OctoMap header nor the legacy binary one";
+      return false;
+    }
+    h->id = "OcTree";
+    h->data_begin = sizeof(type) + sizeof(h->resolution) + sizeof(h->size);
+  } else {
+    bool data = false;
+    std::string token;
+    while (!data && s >> token) {
+      if (token == "id") {
+        s >> h->id;
+      } else if (token == "size") {
+        s >> h->size;
+      } else if (token == "res") {
+        s >> h->resolution;
+      } else {
+        data = token == "data";  // "data", comments and unknown keywords end with their line
+        s.ignore(std::numeric_limits<std::streamsize>::max(), '\n');
+      }
+    }
+    if (!data) {
+      *why = "has no complete header (id, size, res, data)";
+      return false;
+    }
+    h->data_begin = s.eof() ? bytes.size() : size_t(s.tellg());
+  }
+  if (h->id == "1") h->id = "OcTree";  // the deprecated id octomap still accepts
+  if (h->id.empty()) {
+    *why = "has no tree id in its header";
+    return false;
+  }
+  if (!binary && h->id != "OcTree") {
+    *why = "holds a '" + h->id + "', not an OcTree";
+    return false;
+  }
+  if (!(std::isfinite(h->resolution) && h->resolution > 0.0)) {
+    *why = "has an invalid resolution";
+    return false;
+  }
+  return true;
+}
+
+// Walks the node stream from `begin` in octomap's order (depth first, children 0..7) and returns
+// the number of nodes it creates and the end of the stream. Each node record is, in .bt, 2 bytes of
+// child flags, 2 bits per child (00 unknown, 01 free leaf, 10 occupied leaf, 11 inner: its record
+// follows); in .ot, the node's float log-odds then 1 byte with a bit per existing child, whose
+// records follow. A record at depth `max_depth` (the leaves' depth) must have no children.
+bool walkOctomapNodes(const std::string& bytes, size_t begin, bool binary, unsigned max_depth, size_t* nodes,
+                      size_t* end, std::string* why) {
+  const size_t record = binary ? 2 : sizeof(float) + 1;
+  std::vector<unsigned> pending{0};  // depths of the records still to read, next one at the back
+  size_t pos = begin;
+  size_t n = 1;
+  while (!pending.empty()) {
+    const unsigned depth = pending.back();
+    pending.pop_back();
+    if (bytes.size() - pos < record) {
+      *why = "ends inside its node stream (after " + std::to_string(n) + " nodes)";
+      return false;
+    }
+    unsigned children = 0, inner = 0;
+    if (binary) {
+      const unsigned flags = unsigned(uint8_t(bytes[pos])) | unsigned(uint8_t(bytes[pos + 1])) << 8;
+      for (int i = 0; i < 8; ++i) {
+        const unsigned two = (flags >> (2 * i)) & 3u;
+        children += two != 0;
+        inner += two == 3;
+      }
+    } else {
+      float log_odds;
+      std::memcpy(&log_odds, bytes.data() + pos, sizeof(log_odds));
+      if (!std::isfinite(log_odds)) {
+        *why = "holds a non-finite log-odds value";
+        return false;
+      }
+      children = inner = unsigned(std::bitset<8>(uint8_t(bytes[pos + sizeof(float)])).count());
+    }
+    pos += record;
+    if (children > 0 && depth >= max_depth) {
+      *why = "has nodes below the tree depth of " + std::to_string(max_depth);
+      return false;
+    }
+    n += children;
+    pending.insert(pending.end(), inner, depth + 1);  // equal depths: the order among them is immaterial
+  }
+  *nodes = n;
+  *end = pos;
+  return true;
+}
+
 }  // namespace
 
 size_t MapFile::numOccupied() const {
@@ -61,25 +193,40 @@ MapStatus readMapFile(const std::string& path, MapFile* out, std::string* error)
 }
 
 MapStatus readOctomapFile(const std::string& path, MapFile* out, std::string* error) {
-  if (!fileReadable(path)) return fail(MapStatus::kFileNotFound, "cannot open '" + path + "'", error);
+  std::string bytes;
+  {
+    std::ifstream in(path, std::ios::binary);
+    if (!in.good()) return fail(MapStatus::kFileNotFound, "cannot open '" + path + "'", error);
+    bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    if (in.bad()) return fail(MapStatus::kParseError, "cannot read '" + path + "'", error);
+  }
+  const bool binary = extensionOf(path) != "ot";
+  OctomapHeader header;
+  std::string why;
+  if (!parseOctomapHeader(bytes, binary, &header, &why))
+    return fail(MapStatus::kParseError, "'" + path + "' " + why, error);
   std::unique_ptr<octomap::OcTree> tree;
   try {
-    if (extensionOf(path) == "ot") {
-      std::unique_ptr<octomap::AbstractOcTree> abstract(octomap::AbstractOcTree::read(path));
-      auto* t = dynamic_cast<octomap::OcTree*>(abstract.get());
-      if (t) {
-        abstract.release();
-        tree.reset(t);
-      }
-    } else {
-      tree = std::make_unique<octomap::OcTree>(0.1);
-      std::ifstream in(path, std::ios::binary);
-      if (!tree->readBinary(in) || in.bad()) tree.reset();
+    tree = std::make_unique<octomap::OcTree>(header.resolution);
+    if (header.size > 0) {
+      size_t nodes = 0, end = 0;
+      if (!walkOctomapNodes(bytes, header.data_begin, binary, tree->getTreeDepth(), &nodes, &end, &why))
+        return fail(MapStatus::kParseError, "'" + path + "' " + why, error);
+      if (nodes != header.size)
+        return fail(MapStatus::kParseError, "'" + path + "' declares " + std::to_string(header.size) +
+                                                " nodes, its node stream holds " + std::to_string(nodes), error);
+      std::istringstream stream(bytes.substr(header.data_begin, end - header.data_begin));
+      if (binary)
+        tree->readBinaryData(stream);
+      else
+        tree->readData(stream);
+      if (tree->size() != nodes)
+        return fail(MapStatus::kParseError, "OctoMap read " + std::to_string(tree->size()) + " nodes of '" + path +
+                                                "', expected " + std::to_string(nodes), error);
     }
   } catch (const std::exception& e) {
     return fail(MapStatus::kParseError, "OctoMap could not read '" + path + "': " + e.what(), error);
   }
-  if (!tree) return fail(MapStatus::kParseError, "'" + path + "' is not a readable OctoMap OcTree", error);
 
   MapFile file;
   file.resolution_m = tree->getResolution();
@@ -141,15 +288,19 @@ MapInsertStats insertMapFile(const MapFile& file, OccupancyMap* map) {
     for (const MapCell& cell : file.cells) {
       if (cell.occupied != occupied_pass) continue;
       // Voxels whose centre lies in [center - size/2, center + size/2).
+      // The index range in doubles first: a file's coordinates may lie far beyond the int range of
+      // voxel indices (casting those is undefined), so the range is clipped to the window before.
       const Eigen::Vector3d h = Eigen::Vector3d::Constant(0.5 * cell.size_m);
-      Eigen::Vector3i lo = (((cell.center - h) * g.inverseResolution()).array() - 0.5).ceil().cast<int>();
-      Eigen::Vector3i hi = (((cell.center + h) * g.inverseResolution()).array() - (0.5 + 1e-9)).floor().cast<int>();
-      const Eigen::Vector3i own = g.indexOf(cell.center);
+      Eigen::Array3d lo = (((cell.center - h) * g.inverseResolution()).array() - 0.5).ceil();
+      Eigen::Array3d hi = (((cell.center + h) * g.inverseResolution()).array() - (0.5 + 1e-9)).floor();
+      const Eigen::Array3d own = (cell.center * g.inverseResolution()).array().floor();
       for (int a = 0; a < 3; ++a)
         if (lo[a] > hi[a]) lo[a] = hi[a] = own[a];
-      const VoxelBox box = VoxelBox::fromCorners(lo, hi);
-      const VoxelBox inside = box.intersection(window);
-      if (!(inside == box)) ++stats.clipped_cells;
+      const Eigen::Array3d wmin = window.min.cast<double>().array(), wmax = window.max.cast<double>().array();
+      const bool clipped = (lo < wmin).any() || (hi > wmax).any();
+      if (clipped) ++stats.clipped_cells;
+      if ((hi < wmin).any() || (lo > wmax).any() || !(lo.allFinite() && hi.allFinite())) continue;
+      const VoxelBox inside = VoxelBox::fromCorners(lo.max(wmin).cast<int>().matrix(), hi.min(wmax).cast<int>().matrix());
       if (inside.empty()) continue;
       Eigen::Vector3i i;
       for (i.z() = inside.min.z(); i.z() <= inside.max.z(); ++i.z())

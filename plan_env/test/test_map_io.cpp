@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdio>
+#include <fstream>
 #include <random>
 
 #include "topo_planner/plan_env/map_io.h"
@@ -99,6 +100,79 @@ TEST(MapIo, ForestGenMapLoadsWithItsBounds) {
   int negative = 0;
   for (float d : esdf->distances()) negative += d < 0.0f;
   EXPECT_EQ(size_t(negative), stats.occupied_voxels);
+}
+
+// A hand-made OctoMap file holding one chain of inner nodes, `inner_levels` deep, that ends in one
+// occupied leaf at depth inner_levels + 1 (child 0 at every level). octomap's trees are 16 deep,
+// so 15 inner levels put the leaf at the finest depth and 16 put it below the tree.
+std::string octomapChain(bool binary, int inner_levels, int drop_bytes = 0) {
+  std::string s = binary ? "# Octomap OcTree binary file\n" : "# Octomap OcTree file\n";
+  s += "id OcTree\nsize " + std::to_string(inner_levels + 2) + "\nres 0.1\ndata\n";
+  if (binary) {
+    for (int d = 0; d < inner_levels; ++d) s += std::string("\x03\x00", 2);  // child 0 inner
+    s += std::string("\x02\x00", 2);                                         // child 0 an occupied leaf
+  } else {
+    const float log_odds = 3.5f;
+    const std::string value(reinterpret_cast<const char*>(&log_odds), sizeof(log_odds));
+    for (int d = 0; d <= inner_levels; ++d) s += value + '\x01';  // child 0 exists
+    s += value + '\x00';                                          // the leaf
+  }
+  s.resize(s.size() - size_t(drop_bytes));
+  return s;
+}
+
+MapStatus readBytes(const std::string& bytes, const std::string& ext, MapFile* file, std::string* err) {
+  const std::string path = tempPath("handmade." + ext);
+  {
+    std::ofstream out(path, std::ios::binary | std::ios::trunc);
+    out << bytes;
+  }
+  const MapStatus status = readMapFile(path, file, err);
+  std::remove(path.c_str());
+  return status;
+}
+
+TEST(MapIo, OctomapNodeStreamAtTheTreeDepthLoads) {
+  for (const bool binary : {true, false}) {
+    MapFile file;
+    std::string err;
+    ASSERT_EQ(readBytes(octomapChain(binary, 15), binary ? "bt" : "ot", &file, &err), MapStatus::kSuccess) << err;
+    ASSERT_EQ(file.cells.size(), 1u);
+    EXPECT_TRUE(file.cells[0].occupied);
+    EXPECT_NEAR(file.cells[0].size_m, 0.1, 1e-6);  // a leaf of the finest depth
+    // Child 0 at every depth: the lowest key, centre (0 - 2^15 + 0.5) * 0.1 on each axis.
+    EXPECT_NEAR(file.cells[0].center.x(), (0.5 - 32768.0) * 0.1, 1e-2);
+  }
+}
+
+// octomap's readers recurse once per inner node and follow the child flags past the tree depth
+// (found by the octomap fuzz harness as a stack overflow): such a file is refused before.
+TEST(MapIo, OctomapNodeStreamBelowTheTreeDepthIsRefused) {
+  for (const bool binary : {true, false}) {
+    for (const int levels : {16, 40, 20000}) {
+      MapFile file;
+      std::string err;
+      EXPECT_EQ(readBytes(octomapChain(binary, levels), binary ? "bt" : "ot", &file, &err), MapStatus::kParseError)
+          << (binary ? ".bt " : ".ot ") << levels << " levels";
+      EXPECT_NE(err.find("below the tree depth of 16"), std::string::npos) << err;
+      EXPECT_TRUE(file.cells.empty());
+    }
+  }
+}
+
+// A stream that ends early made octomap decode bytes it never read (and recurse on them).
+TEST(MapIo, OctomapTruncatedNodeStreamIsRefused) {
+  for (const bool binary : {true, false}) {
+    MapFile file;
+    std::string err;
+    EXPECT_EQ(readBytes(octomapChain(binary, 10, 1), binary ? "bt" : "ot", &file, &err), MapStatus::kParseError);
+    EXPECT_NE(err.find("ends inside its node stream"), std::string::npos) << err;
+    // A header whose node count differs from the stream's.
+    std::string wrong = octomapChain(binary, 10);
+    wrong.replace(wrong.find("size 12"), 7, "size 13");
+    EXPECT_EQ(readBytes(wrong, binary ? "bt" : "ot", &file, &err), MapStatus::kParseError);
+    EXPECT_NE(err.find("declares 13 nodes"), std::string::npos) << err;
+  }
 }
 
 }  // namespace

@@ -47,8 +47,8 @@ std::unique_ptr<PlannerServer> PlannerServer::create(const ros::NodeHandle& nh, 
   ros::NodeHandle plan_nh(pnh), safety_nh(pnh);
   plan_nh.setCallbackQueue(&s.planning_queue_);
   safety_nh.setCallbackQueue(&s.safety_queue_);
-  s.plan_timer_ = plan_nh.createTimer(ros::Duration(config.plan_period_s), &PlannerServer::planTimer, &s);
-  s.safety_timer_ = safety_nh.createTimer(ros::Duration(config.safety_period_s), &PlannerServer::safetyTimer, &s);
+  s.plan_timer_ = plan_nh.createTimer(ros::Duration(config.node.plan_period_s), &PlannerServer::planTimer, &s);
+  s.safety_timer_ = safety_nh.createTimer(ros::Duration(config.node.safety_period_s), &PlannerServer::safetyTimer, &s);
   s.diagnostics_.reset(new diagnostic_updater::Updater(ros::NodeHandle(), pnh));
   s.diagnostics_->setHardwareID("topo_planner");
   s.diagnostics_->add("planner", [&s](diagnostic_updater::DiagnosticStatusWrapper& status) {
@@ -92,9 +92,9 @@ PlannerServer::~PlannerServer() {
 
 void PlannerServer::odomCallback(const nav_msgs::OdometryConstPtr& msg) {
   const std::string& frame = msg->header.frame_id;
-  if (!frame.empty() && frame != config_.frame_id && frame != "/" + config_.frame_id) {
+  if (!frame.empty() && frame != config_.node.frame_id && frame != "/" + config_.node.frame_id) {
     ROS_WARN_THROTTLE(2.0, "planner: odometry in frame '%s' ignored (expected '%s')", frame.c_str(),
-                      config_.frame_id.c_str());
+                      config_.node.frame_id.c_str());
     return;
   }
   const auto& p = msg->pose.pose.position;
@@ -102,7 +102,7 @@ void PlannerServer::odomCallback(const nav_msgs::OdometryConstPtr& msg) {
   const auto& v = msg->twist.twist.linear;
   Eigen::Vector3d velocity(v.x, v.y, v.z);
   const Eigen::Quaterniond orientation(q.w, q.x, q.y, q.z);
-  if (!config_.odom_twist_in_world) {
+  if (!config_.node.odom_twist_in_world) {
     const double n = orientation.norm();
     if (!std::isfinite(n) || std::abs(n - 1.0) > 1e-2) {
       ROS_WARN_THROTTLE(2.0, "planner: odometry with a non-unit orientation ignored");
@@ -119,9 +119,9 @@ void PlannerServer::odomCallback(const nav_msgs::OdometryConstPtr& msg) {
 
 void PlannerServer::positionCmdCallback(const PositionCommandConstPtr& msg) {
   // The trajectory server's setpoint: whether it follows this planner's trajectory (ReplanFsm).
-  if (!msg->header.frame_id.empty() && msg->header.frame_id != config_.frame_id) {
+  if (!msg->header.frame_id.empty() && msg->header.frame_id != config_.node.frame_id) {
     ROS_WARN_THROTTLE(5.0, "planner: position command in frame '%s' ignored (expected '%s')",
-                      msg->header.frame_id.c_str(), config_.frame_id.c_str());
+                      msg->header.frame_id.c_str(), config_.node.frame_id.c_str());
     return;
   }
   ServerSetpoint sp;
@@ -144,27 +144,22 @@ void PlannerServer::positionCmdCallback(const PositionCommandConstPtr& msg) {
 }
 
 void PlannerServer::goalCallback(const geometry_msgs::PoseStampedConstPtr& msg) {
-  if (!msg->header.frame_id.empty() && msg->header.frame_id != config_.frame_id) {
-    ROS_WARN("planner: goal in frame '%s' ignored (expected '%s')", msg->header.frame_id.c_str(),
-             config_.frame_id.c_str());
+  Eigen::Vector3d goal;
+  std::string why;
+  if (!goalFromMsg(*msg, config_.node.frame_id, config_.node.goal_height_m, &goal, &why)) {
+    ROS_WARN("planner: 2D Nav Goal ignored: %s", why.c_str());
     return;
   }
-  submitGoals({Eigen::Vector3d(msg->pose.position.x, msg->pose.position.y, config_.goal_height_m)}, "2D Nav Goal");
+  submitGoals({goal}, "2D Nav Goal");
 }
 
 void PlannerServer::waypointsCallback(const nav_msgs::PathConstPtr& msg) {
-  if (!msg->header.frame_id.empty() && msg->header.frame_id != config_.frame_id) {
-    ROS_WARN("planner: waypoints in frame '%s' ignored (expected '%s')", msg->header.frame_id.c_str(),
-             config_.frame_id.c_str());
-    return;
-  }
-  if (msg->poses.size() > 1000) {
-    ROS_WARN("planner: %zu waypoints refused (at most 1000)", msg->poses.size());
-    return;
-  }
   std::vector<Eigen::Vector3d> goals;
-  for (const auto& pose : msg->poses)
-    goals.emplace_back(pose.pose.position.x, pose.pose.position.y, pose.pose.position.z);
+  std::string why;
+  if (!goalsFromMsg(*msg, config_.node.frame_id, &goals, &why)) {
+    ROS_WARN("planner: waypoints ignored: %s", why.c_str());
+    return;
+  }
   submitGoals(goals, "waypoints");
 }
 
@@ -187,7 +182,7 @@ void PlannerServer::publishHeartbeat(double now) {
   const InputHealth health = fsm_->inputHealth(now);
   PlannerHeartbeat hb;
   hb.header.stamp = ros::Time::now();
-  hb.header.frame_id = config_.frame_id;
+  hb.header.frame_id = config_.node.frame_id;
   hb.planner_session = session_;
   hb.fsm_state = toString(fsm_->state());
   hb.inputs_ok = health.ok;
@@ -205,10 +200,10 @@ void PlannerServer::planTimer(const ros::TimerEvent&) {
   const double now = ros::Time::now().toSec();
   feedDepth();
   // The mission of the parameter goals_m, once the inputs allow it.
-  if (!config_.goals.empty() && !initial_goals_sent_ && fsm_->inputHealth(now).ok &&
-      fsm_->setGoals(config_.goals) == GoalStatus::kAccepted) {
+  if (!config_.node.goals.empty() && !initial_goals_sent_ && fsm_->inputHealth(now).ok &&
+      fsm_->setGoals(config_.node.goals) == GoalStatus::kAccepted) {
     initial_goals_sent_ = true;
-    ROS_INFO("planner: parameter goals_m: %zu goal(s)", config_.goals.size());
+    ROS_INFO("planner: parameter goals_m: %zu goal(s)", config_.node.goals.size());
   }
   FsmOutput out;
   mapping_->readMaps([&](const OccupancyMap&, const EsdfMap& esdf) {
@@ -257,7 +252,7 @@ PlannerConfig PlannerServer::limitsOf(const ReplanFsm::Config& f) {
 void PlannerServer::reconfigureCallback(PlannerConfig& limits, uint32_t) {
   ReplanFsm::Config next = requested_;
   TopoReplanner::Config& p = next.replanner;
-  setFlightLimits(limits.max_vel_mps, limits.max_acc_mps2, config_.reference_speed_ratio, &next);
+  setFlightLimits(limits.max_vel_mps, limits.max_acc_mps2, config_.node.reference_speed_ratio, &next);
   next.brake_acc_mps2 = limits.brake_acc_mps2;
   next.safety_clearance_m = limits.safety_clearance_m;
   if (requested_.route.clearance_m == requested_.replanner.search.clearance_m) next.route.clearance_m = limits.search_clearance_m;
@@ -285,7 +280,7 @@ void PlannerServer::handle(const FsmOutput& out) {
   if (!out.message.empty()) ROS_INFO("planner: %s", out.message.c_str());
   if (out.new_reference) publishReference();
   if (out.new_route) publishRoute();
-  if (out.trajectory) bspline_pub_.publish(toMsg(*out.trajectory, config_.frame_id, session_));
+  if (out.trajectory) bspline_pub_.publish(toMsg(*out.trajectory, config_.node.frame_id, session_));
   if (out.event) {
     const FsmEvent& e = *out.event;
     const double now = ros::Time::now().toSec();
@@ -294,7 +289,7 @@ void PlannerServer::handle(const FsmOutput& out) {
     if (e.fallback == "give_up") health_.addGiveUp(now, e.message);
     ReplanEvent msg;
     msg.header.stamp = ros::Time::now();
-    msg.header.frame_id = config_.frame_id;
+    msg.header.frame_id = config_.node.frame_id;
     msg.trajectory_id = out.trajectory ? out.trajectory->id : -1;
     msg.fsm_state = toString(e.state);
     msg.trigger = toString(e.trigger);
@@ -323,13 +318,13 @@ void PlannerServer::handle(const FsmOutput& out) {
   if (out.plan) publishPlanMarkers(*out.plan, out.trajectory ? &*out.trajectory : nullptr);
   else if (out.trajectory) publishPlanMarkers(ReplanResult(), &*out.trajectory);
   if (out.goal_reached) ROS_INFO("planner: goal reached");
-  if (out.odometry_jumped && config_.clear_map_on_odom_jump) mapping_->clearMap("the odometry jumped");
+  if (out.odometry_jumped && config_.node.clear_map_on_odom_jump) mapping_->clearMap("the odometry jumped");
 }
 
 void PlannerServer::publishRoute() {
   nav_msgs::Path path;
   path.header.stamp = ros::Time::now();
-  path.header.frame_id = config_.frame_id;
+  path.header.frame_id = config_.node.frame_id;
   for (const Eigen::Vector3d& p : fsm_->route()) {
     geometry_msgs::PoseStamped pose;
     pose.header = path.header;
@@ -344,9 +339,9 @@ void PlannerServer::publishReference() {
   const PolynomialTrajectory ref = fsm_->reference();
   nav_msgs::Path path;
   path.header.stamp = ros::Time::now();
-  path.header.frame_id = config_.frame_id;
+  path.header.frame_id = config_.node.frame_id;
   const double T = ref.duration();
-  const int n = std::min(20000, std::max(2, int(std::ceil(T / config_.vis_sample_s)) + 1));
+  const int n = int(std::min(20000.0, std::max(2.0, std::ceil(T / config_.node.vis_sample_s) + 1.0)));
   for (int k = 0; k < n; ++k) {
     const Eigen::Vector3d p = ref.position(T * k / (n - 1));
     geometry_msgs::PoseStamped pose;
@@ -359,7 +354,7 @@ void PlannerServer::publishReference() {
 }
 
 void PlannerServer::publishPlanMarkers(const ReplanResult& plan, const ExecTrajectory* chosen) {
-  const std::string& f = config_.frame_id;
+  const std::string& f = config_.node.frame_id;
   auto clear = [&](const std::string& ns) {
     visualization_msgs::Marker m;
     m.header.frame_id = f;
@@ -371,7 +366,7 @@ void PlannerServer::publishPlanMarkers(const ReplanResult& plan, const ExecTraje
     visualization_msgs::MarkerArray a;
     a.markers.push_back(clear("trajectory"));
     const bool braking = chosen->braking;
-    a.markers.push_back(lineStrip(chosen->spline, config_.vis_sample_s, f, "trajectory", 0, 0.12, braking ? 1.f : 0.f,
+    a.markers.push_back(lineStrip(chosen->spline, config_.node.vis_sample_s, f, "trajectory", 0, 0.12, braking ? 1.f : 0.f,
                                   braking ? 0.f : 0.8f, 0.f));
     traj_vis_pub_.publish(a);
   }
@@ -382,7 +377,7 @@ void PlannerServer::publishPlanMarkers(const ReplanResult& plan, const ExecTraje
   for (size_t i = 0; i < plan.candidates.size(); ++i) {
     const ReplanCandidate& c = plan.candidates[i];
     const bool ok = std::isfinite(c.selection_cost);
-    candidates.markers.push_back(lineStrip(c.result.spline, config_.vis_sample_s, f, "candidates", int(i), 0.05,
+    candidates.markers.push_back(lineStrip(c.result.spline, config_.node.vis_sample_s, f, "candidates", int(i), 0.05,
                                            ok ? 0.2f : 0.9f, ok ? 0.4f : 0.3f, ok ? 1.0f : 0.3f, 0.8f));
     visualization_msgs::Marker g;
     g.header.frame_id = f;
@@ -440,19 +435,19 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   if (!readMappingParams(ros::NodeHandle(nh, "mapping"), &c.mapping)) return false;
   ParamReader r(nh);
   r.skipNamespace("mapping");
-  r.read("frame_id", c.frame_id);
-  r.read("odom_twist_in_world", c.odom_twist_in_world);
-  r.read("goal_height_m", c.goal_height_m);
-  r.read("plan_period_s", c.plan_period_s);
-  r.read("safety_period_s", c.safety_period_s);
+  r.read("frame_id", c.node.frame_id);
+  r.read("odom_twist_in_world", c.node.odom_twist_in_world);
+  r.read("goal_height_m", c.node.goal_height_m);
+  r.read("plan_period_s", c.node.plan_period_s);
+  r.read("safety_period_s", c.node.safety_period_s);
   ReplanFsm::Config& f = c.fsm;
   r.read("odom_timeout_s", f.odom_timeout_s);
-  r.read("vis_sample_s", c.vis_sample_s);
-  r.read("clear_map_on_odom_jump", c.clear_map_on_odom_jump);
+  r.read("vis_sample_s", c.node.vis_sample_s);
+  r.read("clear_map_on_odom_jump", c.node.clear_map_on_odom_jump);
   std::vector<double> goals;
   r.read("goals_m", goals);
   if (goals.size() % 3 != 0) r.errors() << "goals_m must hold x, y, z triples; ";
-  for (size_t i = 0; i + 2 < goals.size(); i += 3) c.goals.emplace_back(goals[i], goals[i + 1], goals[i + 2]);
+  for (size_t i = 0; i + 2 < goals.size(); i += 3) c.node.goals.emplace_back(goals[i], goals[i + 1], goals[i + 2]);
 
   r.read("fsm/takeover_delay_s", f.takeover_delay_s);
   r.read("fsm/max_takeover_delay_s", f.max_takeover_delay_s);
@@ -507,8 +502,7 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("max_vel_mps", max_vel);
   r.read("max_acc_mps2", max_acc);
   r.read("reference/speed_ratio", ratio);
-  if (!(ratio > 0.0 && ratio <= 1.0)) r.errors() << "reference/speed_ratio must be in (0, 1]; ";
-  c.reference_speed_ratio = ratio;
+  c.node.reference_speed_ratio = ratio;
   setFlightLimits(max_vel, max_acc, ratio, &f);
   f.reference.max_segment_length_m = 3.0;
   f.reference.cruise_timing = true;
@@ -552,9 +546,7 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
 
   std::string why;
   std::string range;
-  if (!(c.plan_period_s > 0.0) || !(c.safety_period_s > 0.0)) range += "plan_period_s and safety_period_s must be positive; ";
-  if (!(c.vis_sample_s > 0.0)) range += "vis_sample_s must be positive; ";
-  if (!std::isfinite(c.goal_height_m)) range += "goal_height_m must be finite; ";
+  if (!c.node.validate(&why)) range += why + "; ";
   if (!f.validate(&why)) range += why + "; ";
   return r.finish("planner", range);
 }

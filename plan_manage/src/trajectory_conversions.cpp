@@ -62,6 +62,31 @@ bool fromMsg(const Bspline& msg, ReceivedTrajectory* out, std::string* why) {
   return true;
 }
 
+bool goalFromMsg(const geometry_msgs::PoseStamped& msg, const std::string& frame_id, double goal_height_m,
+                 Eigen::Vector3d* goal, std::string* why) {
+  if (!msg.header.frame_id.empty() && msg.header.frame_id != frame_id) {
+    if (why) *why = "goal in frame '" + msg.header.frame_id + "' (expected '" + frame_id + "')";
+    return false;
+  }
+  *goal = Eigen::Vector3d(msg.pose.position.x, msg.pose.position.y, goal_height_m);
+  return true;
+}
+
+bool goalsFromMsg(const nav_msgs::Path& msg, const std::string& frame_id, std::vector<Eigen::Vector3d>* goals,
+                  std::string* why) {
+  if (!msg.header.frame_id.empty() && msg.header.frame_id != frame_id) {
+    if (why) *why = "waypoints in frame '" + msg.header.frame_id + "' (expected '" + frame_id + "')";
+    return false;
+  }
+  if (msg.poses.size() > kMaxWaypoints) {
+    if (why) *why = std::to_string(msg.poses.size()) + " waypoints (at most " + std::to_string(kMaxWaypoints) + ")";
+    return false;
+  }
+  goals->clear();
+  for (const auto& pose : msg.poses) goals->emplace_back(pose.pose.position.x, pose.pose.position.y, pose.pose.position.z);
+  return true;
+}
+
 PositionCommand toMsg(const Setpoint& sp, const ros::Time& stamp, const std::string& frame_id) {
   PositionCommand cmd;
   cmd.header.stamp = stamp;
@@ -102,7 +127,8 @@ visualization_msgs::Marker lineStrip(const UniformBspline& spline, double dt_s, 
   m.color.r = r, m.color.g = g, m.color.b = b, m.color.a = a;
   if (!spline.isValid()) return m;
   const double T = spline.duration();
-  const int n = std::min(5000, std::max(2, int(std::ceil(T / dt_s)) + 1));
+  // The count capped in doubles: T / dt_s may exceed the int range.
+  const int n = int(std::min(5000.0, std::max(2.0, std::ceil(T / dt_s) + 1.0)));
   for (int k = 0; k < n; ++k) {
     const Eigen::Vector3d p = spline.evaluate(T * k / (n - 1));
     geometry_msgs::Point pt;

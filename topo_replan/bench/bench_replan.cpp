@@ -77,21 +77,18 @@ int main(int argc, char** argv) {
   }
   summary << "trial,map_id,ok,topo_ms,opt_ms,total_ms,num_paths\n" << std::fixed << std::setprecision(4);
 
+  std::vector<bench::ReplanTask> task_list;
+  const bench::TasksCsvStats csv = bench::readTasksCsv(tasks, &task_list);
+  if (csv.too_many) std::fprintf(stderr, "bench_replan: %s: only the first %zu tasks are run\n", tasks_path.c_str(), task_list.size());
+
   bench::MethodRunner runner(suite);
 
   std::vector<double> total_ms, jerk;
-  int tasks_run = 0, solved = 0, bad_rows = 0;
-  std::string line;
-  while (std::getline(tasks, line)) {
-    if (line.empty() || line[0] == '#') continue;
-    std::replace(line.begin(), line.end(), ',', ' ');
-    std::istringstream row(line);
-    int trial, id;
-    Eigen::Vector3d s, g;
-    if (!(row >> trial >> id >> s.x() >> s.y() >> s.z() >> g.x() >> g.y() >> g.z()) || !s.allFinite() || !g.allFinite()) {
-      ++bad_rows;
-      continue;
-    }
+  int tasks_run = 0, solved = 0;
+  const int bad_rows = csv.bad_rows;
+  for (const bench::ReplanTask& task : task_list) {
+    const int trial = task.trial, id = task.map_id;
+    const Eigen::Vector3d s = task.start, g = task.goal;
     if (map_id >= 0 && id != map_id) continue;
     PolynomialTrajectory reference;
     bench::TaskOutcome o;

@@ -265,6 +265,34 @@ bool writeCsv(const std::vector<TaskOutcome>& outcomes, const std::string& path)
   return bool(f);
 }
 
+TasksCsvStats readTasksCsv(std::istream& in, std::vector<ReplanTask>* tasks, size_t max_tasks) {
+  TasksCsvStats stats;
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#' || line == "\r") continue;
+    ++stats.rows;
+    if (tasks->size() >= max_tasks) {
+      stats.too_many = true;
+      break;
+    }
+    if (line.size() > 4096) {
+      ++stats.bad_rows;
+      continue;
+    }
+    std::replace(line.begin(), line.end(), ',', ' ');
+    std::istringstream row(line);
+    ReplanTask t;
+    if (!(row >> t.trial >> t.map_id >> t.start.x() >> t.start.y() >> t.start.z() >> t.goal.x() >> t.goal.y() >>
+          t.goal.z()) ||
+        !t.start.allFinite() || !t.goal.allFinite()) {
+      ++stats.bad_rows;
+      continue;
+    }
+    tasks->push_back(t);
+  }
+  return stats;
+}
+
 double jerkRatio(const std::vector<TaskOutcome>& outcomes, Method a, Method b, int* common) {
   std::map<std::pair<std::string, int>, std::pair<double, double>> pairs;  // (ja, jb); NaN when unsolved
   for (const TaskOutcome& o : outcomes) {

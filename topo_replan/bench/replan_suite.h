@@ -11,6 +11,7 @@
 // and acceleration within the limits).
 
 #include <cstdint>
+#include <istream>
 #include <map>
 #include <memory>
 #include <string>
@@ -90,6 +91,24 @@ std::map<std::string, std::map<Method, MethodSummary>> summarize(const std::vect
 /// The paper's Table I layout, as Markdown.
 std::string markdownTable(const std::map<std::string, std::map<Method, MethodSummary>>& summary);
 bool writeCsv(const std::vector<TaskOutcome>& outcomes, const std::string& path);
+/// One row of a forest_gen tasks file: `#trial,map_id,start_x,start_y,start_z,end_x,end_y,end_z`.
+struct ReplanTask {
+  int trial = 0;
+  int map_id = 0;
+  Eigen::Vector3d start = Eigen::Vector3d::Zero();  ///< [m]
+  Eigen::Vector3d goal = Eigen::Vector3d::Zero();   ///< [m]
+};
+/// What readTasksCsv skipped.
+struct TasksCsvStats {
+  int rows = 0;      ///< data rows read (comment and empty lines excluded)
+  int bad_rows = 0;  ///< rows without 8 numbers, with non-finite coordinates, or too long
+  bool too_many = false;  ///< more than max_tasks good rows: the rest was not read
+};
+/// Reads a tasks file (forest_gen's CSV; '#' starts a comment line). A row that does not parse is
+/// counted in bad_rows and skipped; lines longer than 4096 bytes are bad rows. At most `max_tasks`
+/// tasks are kept.
+TasksCsvStats readTasksCsv(std::istream& in, std::vector<ReplanTask>* tasks, size_t max_tasks = 1000000);
+
 /// Mean jerk integral of method a over that of method b, on the tasks both solved (all densities).
 double jerkRatio(const std::vector<TaskOutcome>& outcomes, Method a, Method b, int* common = nullptr);
 

@@ -61,6 +61,7 @@
 
 #include "topo_planner/plan_manage/health.h"
 #include "topo_planner/plan_manage/mapping_server.h"
+#include "topo_planner/plan_manage/planner_settings.h"
 #include "topo_planner/PlannerConfig.h"
 #include "topo_planner/PositionCommand.h"
 #include "topo_planner/topo_replan/replan_fsm.h"
@@ -70,18 +71,9 @@ namespace topo_planner {
 class PlannerServer {
  public:
   struct Config {
+    PlannerSettings node;  ///< the node's own settings (frames, periods, visualisation, goals_m)
     ReplanFsm::Config fsm;
     MappingServer::Config mapping;
-    std::string frame_id = "world";     ///< world frame of odometry, goals and outputs
-    bool odom_twist_in_world = false;   ///< the odometry twist is in the world frame (some VIOs)
-    double goal_height_m = 1.0;         ///< height of rviz 2D Nav Goals [m]
-    double plan_period_s = 0.05;        ///< FSM tick period [s]
-    double safety_period_s = 0.05;      ///< safety check period [s]
-    std::vector<Eigen::Vector3d> goals; ///< a mission flown once odometry arrives (param goals_m)
-    double vis_sample_s = 0.05;         ///< time step of the trajectory markers [s]
-    /// Forget the map when the odometry jumps (the FSM holds, then replans in the space seen anew).
-    bool clear_map_on_odom_jump = true;
-    double reference_speed_ratio = 0.75;  ///< the reference's limits / the optimiser's (reference/speed_ratio)
   };
 
   static std::unique_ptr<PlannerServer> create(const ros::NodeHandle& nh, const Config& config, std::string* error);

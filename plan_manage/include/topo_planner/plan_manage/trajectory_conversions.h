@@ -2,6 +2,8 @@
 // Conversions between the planner's core types and the closed loop's messages, in one place for the
 // planner node and the trajectory server.
 
+#include <geometry_msgs/PoseStamped.h>
+#include <nav_msgs/Path.h>
 #include <ros/time.h>
 #include <visualization_msgs/Marker.h>
 
@@ -33,6 +35,19 @@ struct ReceivedTrajectory {
 /// The content of a message; false (with a reason) for an invalid one (too few or non-finite
 /// control points, bad degree or knot span, a non-finite heading target).
 bool fromMsg(const Bspline& msg, ReceivedTrajectory* out, std::string* why);
+
+/// Most waypoints a nav_msgs/Path goal may hold.
+constexpr size_t kMaxWaypoints = 1000;
+
+/// The goal of a 2-D navigation goal (rviz): its x, y at `goal_height_m`. False (with a reason) when
+/// its header names a frame other than `frame_id` (an empty frame_id in the message is taken as
+/// `frame_id`); the values are checked by the FSM (ReplanFsm::setGoals refuses NaN/inf).
+bool goalFromMsg(const geometry_msgs::PoseStamped& msg, const std::string& frame_id, double goal_height_m,
+                 Eigen::Vector3d* goal, std::string* why);
+/// The waypoints of a path, in order. False (with a reason) for another frame or more than
+/// kMaxWaypoints poses.
+bool goalsFromMsg(const nav_msgs::Path& msg, const std::string& frame_id, std::vector<Eigen::Vector3d>* goals,
+                  std::string* why);
 
 PositionCommand toMsg(const Setpoint& setpoint, const ros::Time& stamp, const std::string& frame_id);
 
