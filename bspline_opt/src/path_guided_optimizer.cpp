@@ -343,9 +343,14 @@ void PathGuidedOptimizer::finish(const EsdfMap& map, OptimizationResult* result)
   }
   const int intervals = std::max(1, int(wanted));
   stats.min_clearance_m = std::numeric_limits<double>::infinity();
-  bool out_of_map = false, collision = false;
+  bool out_of_map = false, collision = false, out_of_band = false;
+  auto bandExcess = [&](double z) { return std::max({0.0, config_.min_z_m - z, z - config_.max_z_m}); };
+  const double band_allowed =
+      std::max(bandExcess(spline.evaluate(0.0).z()), bandExcess(spline.evaluate(duration).z())) + 0.05;
   for (int k = 0; k <= intervals; ++k) {
-    const DistanceQuery q = map.query(spline.evaluate(duration * k / intervals));
+    const Eigen::Vector3d p = spline.evaluate(duration * k / intervals);
+    if (bandExcess(p.z()) > band_allowed) out_of_band = true;
+    const DistanceQuery q = map.query(p);
     if (q.status == QueryStatus::kOutOfMap || q.status == QueryStatus::kInvalidInput) {
       out_of_map = true;
       continue;
@@ -356,9 +361,9 @@ void PathGuidedOptimizer::finish(const EsdfMap& map, OptimizationResult* result)
   }
   stats.check_samples = intervals + 1;
 
-  if (out_of_map) {
+  if (out_of_map || out_of_band) {
     result->status = OptimizationStatus::kOutOfMap;
-    result->message = "curve leaves the map";
+    result->message = out_of_map ? "curve leaves the map" : "curve leaves the height band";
   } else if (collision) {
     result->status = OptimizationStatus::kInCollision;
     result->message = "curve closer than the clearance to an obstacle";

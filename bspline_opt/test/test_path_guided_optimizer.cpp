@@ -267,6 +267,32 @@ TEST(PathGuidedOptimizer, OutOfMapIsReported) {
   EXPECT_EQ(PathGuidedOptimizer(testConfig()).check(s, map).status, OptimizationStatus::kOutOfMap);
 }
 
+// The height band (a geofence): a curve that climbs out of it fails the check as leaving the map;
+// one that starts below it (a take-off) may be as far out as its start.
+TEST(PathGuidedOptimizer, TheHeightBandIsChecked) {
+  SyntheticScene scene({10.0, 6.0, 4.0});
+  const EsdfMap& map = scene.finish();
+  PathGuidedOptimizer::Config config = testConfig();
+  config.min_z_m = 0.5;
+  config.max_z_m = 2.0;
+  const PathGuidedOptimizer optimizer(config);
+  auto through = [](std::vector<Eigen::Vector3d> points) {
+    UniformBspline s;
+    EXPECT_TRUE(UniformBspline::fitToPoints(points, 0.5, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(),
+                                            Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), 3, &s));
+    return s;
+  };
+  const OptimizationResult over = optimizer.check(through({{1, 3, 1.5}, {3, 3, 2.0}, {5, 3, 2.6}, {7, 3, 2.0}, {9, 3, 1.5}}), map);
+  EXPECT_EQ(over.status, OptimizationStatus::kOutOfMap);
+  EXPECT_NE(over.message.find("height band"), std::string::npos) << over.message;
+  EXPECT_EQ(optimizer.check(through({{1, 3, 1.0}, {3, 3, 1.4}, {5, 3, 1.6}, {7, 3, 1.4}, {9, 3, 1.0}}), map).status,
+            OptimizationStatus::kSuccess);
+  EXPECT_EQ(optimizer.check(through({{1, 3, 0.2}, {3, 3, 0.6}, {5, 3, 1.0}, {7, 3, 1.2}, {9, 3, 1.2}}), map).status,
+            OptimizationStatus::kSuccess);  // from below the band into it
+  EXPECT_EQ(PathGuidedOptimizer(testConfig()).check(through({{1, 3, 1.5}, {3, 3, 2.0}, {5, 3, 2.6}, {7, 3, 2.0}, {9, 3, 1.5}}), map).status,
+            OptimizationStatus::kSuccess);  // no band
+}
+
 // Under a low overhang near the window's floor (a table 0.55 m above the floor of the map, which is
 // also the window's bottom face, as with the simulation's raised floor), the overhang's ESDF
 // gradient pushes the control points down. The window's faces count as obstacles in the collision

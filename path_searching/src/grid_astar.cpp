@@ -31,6 +31,11 @@ GridAStar::Result GridAStar::search(const EsdfMap& map, const Eigen::Vector3d& s
   box.extend(s);
   box.extend(e);
   box = box.inflated(margin).intersection(g.windowBox());
+  // The height band, stretched to hold the start and the goal (a take-off from below it).
+  const int band_lo = std::min({s.z(), e.z(), g.indexOf(Eigen::Vector3d(0, 0, std::max(config_.min_z_m, -1e6))).z()});
+  const int band_hi = std::max({s.z(), e.z(), g.indexOf(Eigen::Vector3d(0, 0, std::min(config_.max_z_m, 1e6))).z()});
+  box.min.z() = std::max(box.min.z(), band_lo);
+  box.max.z() = std::min(box.max.z(), band_hi);
   const Eigen::Vector3i n = box.size();
   const size_t volume = size_t(box.volume());
   if (stamp_.size() < volume) {

@@ -56,7 +56,7 @@ void TopologicalRoadmap::extend(int samples, const VisibilityChecker& checker, s
     ++stats->samples;
     const Eigen::Vector3d u(unit(*rng), unit(*rng), unit(*rng));
     const Eigen::Vector3d p = centre_ + rotation_ * half_.cwiseProduct(u);
-    if (!checker.isFree(p)) {
+    if (p.z() < config_.min_z_m || p.z() > config_.max_z_m || !checker.isFree(p)) {
       ++stats->rejected;
       continue;
     }

@@ -183,6 +183,21 @@ TEST(TopoSearch, FloatingBoxOverUnderLeftRight) {
   expectPairwiseDistinct(r.paths, map, 0.3);
 }
 
+// The height band: with its top below the box, no guide path goes over it.
+TEST(TopoSearch, TheHeightBandKeepsSamplesInside) {
+  SyntheticScene scene({10.0, 8.0, 4.0});
+  scene.box({4.2, 3.2, 1.4}, {5.8, 4.8, 2.6});
+  const EsdfMap& map = scene.finish();
+  TopoPathSearch::Config c = searchConfig(800);
+  c.roadmap.sample_inflation_m = {1.0, 2.5, 1.8};
+  c.roadmap.max_z_m = 2.6;
+  TopoPathSearch search(c);
+  const TopoSearchResult r = search.search(map, {1.5, 4, 2}, {8.5, 4, 2});
+  ASSERT_EQ(r.status, SearchStatus::kSuccess) << toString(r.status);
+  for (const Path& p : r.paths)
+    for (const Eigen::Vector3d& q : p) EXPECT_LE(q.z(), 2.6) << q.transpose();
+}
+
 TEST(TopoSearch, VerticalStartToGoalDirectionWorks) {
   SyntheticScene scene({6.0, 6.0, 6.0});
   scene.box({2.0, 2.0, 2.8}, {4.0, 4.0, 3.2});  // a slab between start and goal

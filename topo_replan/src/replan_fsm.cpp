@@ -223,13 +223,25 @@ bool ReplanFsm::Config::validate(std::string* why) const {
   return true;
 }
 
+namespace {
+// The replanner's settings with the route's height band (the geofence) applied to its searches and
+// its final check.
+TopoReplanner::Config bandedReplanner(const ReplanFsm::Config& config) {
+  TopoReplanner::Config c = config.replanner;
+  c.search.roadmap.min_z_m = c.astar.min_z_m = c.optimizer.min_z_m = config.route.min_z_m;
+  c.search.roadmap.max_z_m = c.astar.max_z_m = c.optimizer.max_z_m = config.route.max_z_m;
+  return c;
+}
+
+}  // namespace
+
 std::unique_ptr<ReplanFsm> ReplanFsm::create(const Config& config, std::string* error) {
   std::string why;
   if (!config.validate(&why)) {
     if (error) *error = "invalid FSM config: " + why;
     return nullptr;
   }
-  std::unique_ptr<TopoReplanner> replanner = TopoReplanner::create(config.replanner, error);
+  std::unique_ptr<TopoReplanner> replanner = TopoReplanner::create(bandedReplanner(config), error);
   if (!replanner) return nullptr;
   return std::unique_ptr<ReplanFsm>(new ReplanFsm(config, std::move(replanner)));
 }
@@ -269,7 +281,7 @@ bool ReplanFsm::reconfigure(const Config& config, std::string* why) {
 void ReplanFsm::applyPendingConfigLocked(FsmOutput* out) {
   if (!pending_config_) return;
   std::string error;
-  std::unique_ptr<TopoReplanner> replanner = TopoReplanner::create(pending_config_->replanner, &error);
+  std::unique_ptr<TopoReplanner> replanner = TopoReplanner::create(bandedReplanner(*pending_config_), &error);
   if (!out->message.empty()) out->message += "; ";
   if (replanner) {
     config_ = *pending_config_;
@@ -1012,6 +1024,28 @@ std::optional<ExecTrajectory> ReplanFsm::restToRestLocked(const std::vector<Eige
   return escape;
 }
 
+void ReplanFsm::referenceNotRebuiltLocked(double t, const EsdfMap& map, FsmOutput* out) {
+  if (last_goal_status_ != GoalStatus::kReferenceFailed) {
+    // The map shows a goal of the mission in an obstacle (or out of the map window): it ends, saying why.
+    giveUpLocked(t, map, last_goal_status_, ReplanStatus::kGoalInCollision,
+                 std::string("the mission's goals are no longer valid (") + toString(last_goal_status_) + ")", out);
+    return;
+  }
+  // The minimum-snap reference could not be built from the state it starts from (its limits, from a
+  // fast or turning state): the goals are still valid. A moving vehicle stops and rebuilds it from
+  // rest; at rest it is tried again at the next tick (the mission's time limit bounds the tries).
+  last_goal_status_ = GoalStatus::kAccepted;
+  const bool moving = current_ && !current_->manoeuvre() && t < current_->endTime();
+  if (moving) {
+    emergencyStopLocked(t, map, "the mission's reference could not be rebuilt from the moving state: stopping to "
+                        "rebuild it from rest", out, nullptr, ReplanStatus::kInvalidInput);
+    return;
+  }
+  ++consecutive_failures_;
+  if (state_ != FsmState::kGenNewTraj && state_ != FsmState::kEmergencyStop)
+    setState(FsmState::kGenNewTraj, out, "the mission's reference could not be rebuilt: trying again");
+}
+
 void ReplanFsm::startManoeuvreLocked(ExecTrajectory manoeuvre, bool backoff, FsmEvent* event, FsmOutput* out,
                                      const std::string& why) {
   if (backoff) {
@@ -1035,7 +1069,9 @@ void ReplanFsm::startManoeuvreLocked(ExecTrajectory manoeuvre, bool backoff, Fsm
 }
 
 bool ReplanFsm::handleStallLocked(double t, const EsdfMap& map, FsmOutput* out) {
-  if (!config_.global_route || !(config_.progress_timeout_s > 0.0) || !progress_.active() || goals_.empty())
+  const bool flying = state_ == FsmState::kGenNewTraj || state_ == FsmState::kExecTraj ||
+                      state_ == FsmState::kReplanTraj || state_ == FsmState::kEmergencyStop;
+  if (!config_.global_route || !(config_.progress_timeout_s > 0.0) || !progress_.active() || goals_.empty() || !flying)
     return false;
   const FlatState here = takeoverStateLocked(t);
   progress_.update(t, here.position);
@@ -1571,7 +1607,7 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
       if (startGoalsLocked(t, map, &out))
         plan(t, map, fresh ? FsmEvent::Trigger::kNewGoal : FsmEvent::Trigger::kRetry, &lock, &out, now);
       else if (!fresh)
-        setState(FsmState::kWaitTarget, &out, "the mission's goals are no longer valid");
+        referenceNotRebuiltLocked(t, map, &out);
       break;
     }
     case FsmState::kExecTraj:
@@ -1632,7 +1668,7 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
         failures_at_reroute_ = 0;
         plan(t, map, FsmEvent::Trigger::kRetry, &lock, &out, now);
       } else {
-        setState(FsmState::kWaitTarget, &out, "stopped, the mission's goals are no longer valid");
+        referenceNotRebuiltLocked(t, map, &out);
       }
       break;
     }

@@ -611,6 +611,32 @@ TEST(ReplanFsm, KeepsToTheHeightBand) {
   }
 }
 
+// A goal the map later shows inside an obstacle (seen while the vehicle stopped for stale depth):
+// rebuilding the mission's reference from rest refuses it, and the mission ends with a give_up
+// event that says why (it went to WAIT_TARGET without an event before).
+TEST(ReplanFsm, AGoalFoundInAnObstacleEndsTheMissionSayingWhy) {
+  Corridor before_scene, after_scene;
+  after_scene.scene.box({21.5, 3.5, 1.0}, {22.5, 4.5, 2.0});
+  const EsdfMap& before = before_scene.scene.finish();
+  const EsdfMap& after = after_scene.scene.finish();
+  ReplanFsm::Config config = testConfig();
+  config.depth_timeout_s = 0.5;
+  auto fsm = makeFsm(config);
+  Faults faults;
+  faults.depth_from = 3.0;
+  faults.depth_to = 6.0;
+  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}},
+                            [&](double t, const Eigen::Vector3d&) -> const EsdfMap& { return t < 4.0 ? before : after; },
+                            600, after, faults);
+  EXPECT_FALSE(log.goal_reached);
+  EXPECT_EQ(fsm->state(), FsmState::kWaitTarget);
+  EXPECT_EQ(fsm->lastGoalStatus(), GoalStatus::kGoalInObstacle);
+  ASSERT_FALSE(log.events.empty());
+  EXPECT_EQ(log.events.back().fallback, "give_up");
+  EXPECT_NE(log.events.back().message.find("no longer valid"), std::string::npos) << log.events.back().message;
+  EXPECT_GT(log.min_clearance, config.safety_clearance_m);
+}
+
 // New goals given while a replan is running (the FSM's mutex is released then) are flown: a failed
 // replan's re-route of the old mission must not overwrite them, nor its give-up drop them.
 TEST(ReplanFsm, GoalsGivenWhileAReplanRunsAreFlown) {

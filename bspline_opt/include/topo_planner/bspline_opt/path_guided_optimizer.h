@@ -98,6 +98,10 @@ class PathGuidedOptimizer {
     bool reallocate_time = true;  ///< lengthen the knot span when the limits are exceeded (else kInfeasible)
     double max_time_ratio = 3.0;  ///< a longer stretch is kInfeasible (the stretched spline is returned)
     double clearance_m = 0.25;    ///< every curve sample keeps at least this ESDF distance [m]
+    /// Height band (a geofence): a curve sample farther out of it than the curve's start or end
+    /// (by more than 0.05 m) fails the check as leaving the map [m].
+    double min_z_m = -1e9;
+    double max_z_m = 1e9;
     double check_step_m = 0.0;    ///< arc-length step of the collision check [m]; 0 = half a voxel
     bool unknown_is_free = true;  ///< unknown voxels pass the check (replanning in a partial map)
     // PGO's second chance: a refined curve that fails the check in collision (the cost, on control

@@ -20,6 +20,8 @@ class GridAStar {
     bool unknown_is_free = true;
     double search_margin_m = 3.0;    ///< the search box is the start-goal box plus this on each side [m]
     int max_expansions = 400000;     ///< budget
+    double min_z_m = -1e9;           ///< height band (a geofence): the box keeps to it, and to start and goal [m]
+    double max_z_m = 1e9;
   };
   struct Result {
     SearchStatus status = SearchStatus::kInvalidInput;

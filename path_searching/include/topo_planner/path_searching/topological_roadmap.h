@@ -33,6 +33,8 @@ class TopologicalRoadmap {
     int max_raw_paths = 300;  ///< cap on the paths the depth-first search extracts
     int max_path_nodes = 20;  ///< longest path (in nodes) the depth-first search follows
     int max_search_expansions = 20000;  ///< budget of node expansions of the depth-first search
+    double min_z_m = -1e9;    ///< height band (a geofence): samples outside it are rejected [m]
+    double max_z_m = 1e9;
   };
   enum class NodeType : uint8_t { kGuard, kConnector };
   struct Node {

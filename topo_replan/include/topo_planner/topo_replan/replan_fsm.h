@@ -414,6 +414,10 @@ class ReplanFsm {
   /// The stall rule (Config::progress_timeout_s), once per tick before the state machine: true when
   /// it acted (re-route, stop, back-off or give-up) and the tick ends there.
   bool handleStallLocked(double t, const EsdfMap& map, FsmOutput* out);
+  /// The mission's reference could not be rebuilt (startGoalsLocked refused its remaining goals):
+  /// goals now invalid end the mission (give_up, saying why); a reference that failed its limits is
+  /// rebuilt from rest (a moving vehicle stops first) instead of dropping the mission.
+  void referenceNotRebuiltLocked(double t, const EsdfMap& map, FsmOutput* out);
   /// Publishes a back-off (or escape) manoeuvre: the way back is used up, the route is searched
   /// again from where it ends, EMERGENCY_STOP until it has been flown.
   void startManoeuvreLocked(ExecTrajectory manoeuvre, bool backoff, FsmEvent* event, FsmOutput* out,
