@@ -141,6 +141,25 @@ TEST_F(CostGradients, TermsAreZeroWhereThePaperSaysSo) {
   EXPECT_EQ(accelerationCost(q, 0.1, 2.5, 1.0, nullptr), 0.0);
 }
 
+// The faces of a height band count as obstacles: a point 0.2 m under its top is pushed down; the
+// gradient matches.
+TEST(CollisionCost, TheHeightBandFacesCountAsObstacles) {
+  SyntheticScene scene({8.0, 8.0, 3.0});
+  const EsdfMap& map = scene.finish();
+  const double d0 = 0.5;
+  Eigen::MatrixX3d q(1, 3);
+  q.row(0) << 4.0, 4.0, 1.8;
+  EXPECT_EQ(collisionCost(q, 0, 0, map, d0, 1.0, nullptr), 0.0);  // no band
+  Eigen::MatrixX3d grad = Eigen::MatrixX3d::Zero(1, 3);
+  EXPECT_NEAR(collisionCost(q, 0, 0, map, d0, 1.0, &grad, 0.5, 2.0), std::pow(d0 - 0.2, 2), 1e-12);
+  EXPECT_GT(grad(0, 2), 0.0);  // descent moves it down
+  Eigen::MatrixX3d pts(3, 3);
+  pts << 4.0, 4.0, 1.8, 4.0, 4.0, 0.7, 4.0, 4.0, 2.2;
+  expectGradientMatches([&](const Eigen::MatrixX3d& x, Eigen::MatrixX3d* g) {
+    return collisionCost(x, 0, 2, map, d0, 1.0, g, 0.5, 2.0);
+  }, pts, "band");
+}
+
 // The window's faces count as obstacles: a point near the floor costs (d0 - its height above the
 // interpolation domain)^2 and is pushed up; a point outside costs more; the gradient matches.
 TEST(CollisionCost, TheWindowFacesCountAsObstacles) {

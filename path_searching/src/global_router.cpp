@@ -128,10 +128,12 @@ GlobalRouter::Result GlobalRouter::route(const EsdfMap& map, const Eigen::Vector
   }
   const double w = config_.clearance_weight, pref = config_.preferred_clearance_m;
   auto heuristic = [&](const Eigen::Vector3d& q) { return float(config_.heuristic_weight * (q - goal).norm()); };
-  auto avoided = [&](const Eigen::Vector3d& q) {
+  // Zones that overlap compound: a place stalled at again weighs more each time.
+  auto avoidance = [&](const Eigen::Vector3d& q) {
+    double factor = 1.0;
     for (const Zone& z : avoided_)
-      if ((q - z.center).squaredNorm() < z.radius_m * z.radius_m) return true;
-    return false;
+      if ((q - z.center).squaredNorm() < z.radius_m * z.radius_m) factor *= 1.0 + config_.avoid_weight;
+    return factor;
   };
   // A shortcut from a to b crosses a zone that holds neither of them.
   auto crossesZone = [&](const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
@@ -185,7 +187,7 @@ GlobalRouter::Result GlobalRouter::route(const EsdfMap& map, const Eigen::Vector
           if (!usable(a, nb, &pn, &dn)) continue;
           if (a == ae) pn = goal;
           double penalty = 1.0 + w * std::max(0.0, pref - double(dn)) / pref;
-          if (!avoided_.empty() && avoided(pn)) penalty *= 1.0 + config_.avoid_weight;
+          if (!avoided_.empty()) penalty *= avoidance(pn);
           const float cost = gc + float((pn - pc).norm() * penalty);
           if (stamp_[a] == generation_ && g_[a] <= cost) continue;
           stamp_[a] = generation_;

@@ -102,6 +102,20 @@ TEST(GlobalRouter, AvoidedZonesWeighButNeverBlock) {
   for (const Eigen::Vector3d& p : resamplePath(r.path, 0.05))
     EXPECT_GT((p - Eigen::Vector3d(11.0, 8.0, 1.5)).norm(), 1.5 - 0.2) << p.transpose();
 
+  // Zones at one place compound: at a light weight one zone is not worth the far window, three are.
+  GlobalRouter::Config light;
+  light.avoid_weight = 0.5;
+  GlobalRouter light_router(light);
+  const GlobalRouter::Zone near_window{Eigen::Vector3d(11.0, 8.0, 1.5), 1.5};
+  light_router.setAvoided({near_window});
+  r = light_router.route(map, start, goal);
+  ASSERT_EQ(r.status, SearchStatus::kSuccess);
+  for (const Eigen::Vector3d& c : wallCrossings(r.path)) EXPECT_NEAR(c.y(), 8.0, 0.5);
+  light_router.setAvoided({near_window, near_window, near_window});
+  r = light_router.route(map, start, goal);
+  ASSERT_EQ(r.status, SearchStatus::kSuccess);
+  for (const Eigen::Vector3d& c : wallCrossings(r.path)) EXPECT_NEAR(c.y(), 13.0, 0.5);
+
   // The far window closed: the avoided near one is the only way, and it is taken.
   SyntheticScene one = wallWithWindow(8.0, 1.5);
   const EsdfMap& one_map = one.finish();

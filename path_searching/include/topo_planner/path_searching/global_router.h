@@ -71,7 +71,8 @@ class GlobalRouter {
   const Config& config() const { return config_; }
   /// A place the route keeps away from where it can (the FSM's stalls: where the vehicle made no
   /// progress along an earlier route): a cell whose best voxel lies within radius_m of center costs
-  /// 1 + avoid_weight times more to enter, and the shortening takes no shortcut that crosses a zone
+  /// 1 + avoid_weight times more to enter (compounding where zones overlap: a place stalled at again
+  /// weighs more each time), and the shortening takes no shortcut that crosses a zone
   /// between two points outside it. The zones only weigh: they never block, so kNoPath still proves
   /// the goal unreachable.
   struct Zone {
