@@ -256,7 +256,14 @@ void FlightMonitor::odomCallback(const nav_msgs::OdometryConstPtr& msg) {
     t = last_stream_t_s_ = clock_.addStreamStamp(msg->header.stamp.toSec());
     have_stream_time_ = true;
   } else {
+    // Beside a ground truth, odometry must be stamped, in order, and not ahead of the truth's time:
+    // another stamp is no vehicle's state of this clock.
     t = timeOf(msg->header.stamp);
+    if (msg->header.stamp.isZero() || (have_odom_ && t < last_odom_t_s_) || (have_stream_time_ && t > nowS() + 1.0)) {
+      ROS_WARN_THROTTLE(5.0, "flight_monitor: odometry stamped %.3f ignored (unstamped, out of order or ahead)",
+                        msg->header.stamp.toSec());
+      return;
+    }
   }
   have_odom_ = true;
   last_odom_t_s_ = t;
@@ -309,6 +316,16 @@ void FlightMonitor::setpointCallback(const topo_planner::PositionCommandConstPtr
   s.position_m = Eigen::Vector3d(msg->position.x, msg->position.y, msg->position.z);
   s.velocity_mps = Eigen::Vector3d(msg->velocity.x, msg->velocity.y, msg->velocity.z);
   s.acceleration_mps2 = Eigen::Vector3d(msg->acceleration.x, msg->acceleration.y, msg->acceleration.z);
+  // What the trajectory server commands is finite, in the world frame, in order and of this clock
+  // (the planner refuses the same).
+  if (!s.position_m.allFinite() || !s.velocity_mps.allFinite() || !s.acceleration_mps2.allFinite() ||
+      (!msg->header.frame_id.empty() && msg->header.frame_id != config_.frame_id) || s.t_s < last_setpoint_t_s_ ||
+      (have_stream_time_ && s.t_s > nowS() + 1.0)) {
+    ROS_WARN_THROTTLE(5.0, "flight_monitor: setpoint ignored (non-finite, frame '%s', out of order or ahead)",
+                      msg->header.frame_id.c_str());
+    return;
+  }
+  last_setpoint_t_s_ = s.t_s;
   const int jumps = recorder_.setpoints().stats().jumps;
   recorder_.addSetpoint(s);
   if (recorder_.setpoints().stats().jumps > jumps) {
@@ -321,6 +338,13 @@ void FlightMonitor::setpointCallback(const topo_planner::PositionCommandConstPtr
 
 void FlightMonitor::heartbeatCallback(const topo_planner::PlannerHeartbeatConstPtr& msg) {
   const double t = nowS();
+  // The planner's heartbeat is in the world frame and stamped now (as the trajectory server takes it).
+  if ((!msg->header.frame_id.empty() && msg->header.frame_id != config_.frame_id) ||
+      !(std::abs(timeOf(msg->header.stamp) - t) <= 1.0) || msg->header.stamp.isZero()) {
+    ROS_WARN_THROTTLE(5.0, "flight_monitor: heartbeat ignored (frame '%s', stamped %.3f)", msg->header.frame_id.c_str(),
+                      msg->header.stamp.toSec());
+    return;
+  }
   if (resend_.onHeartbeat(msg->planner_session, msg->inputs_ok, t) && recorder_.started() && !done_)
     ROS_WARN("flight_monitor: the planner restarted (session %lu): goal %d goes again once its inputs are fresh",
              (unsigned long)msg->planner_session, recorder_.activeGoal() + 1);

@@ -106,6 +106,7 @@ bool MappingServer::Config::validate(std::string* why) const {
     err << "sync_max_interval_s must be in [0, 3600]; ";
   if (!cloud_sensor_origin_m.allFinite()) err << "cloud/sensor_origin_m must be finite; ";
   if (!finitePositive(cloud_max_pose_age_s)) err << "cloud/max_pose_age_s must be positive; ";
+  if (cloud_max_points < 1) err << "cloud/max_points must be >= 1; ";
   const double half_window = 0.5 * std::min(occupancy.size_m.x(), occupancy.size_m.y());
   if (recenter_on_vehicle && !(finitePositive(recenter_threshold_m) && recenter_threshold_m < half_window))
     err << "recenter_threshold_m must be positive and below half the window's x/y size; ";
@@ -115,6 +116,7 @@ bool MappingServer::Config::validate(std::string* why) const {
   if (!rate_ok(esdf_publish_rate_hz)) err << "publish/esdf_rate_hz must be 0 (off) or in [0.001, 1000]; ";
   if (!std::isfinite(esdf_slice_height_m)) err << "publish/esdf_slice_height_m must be finite; ";
   if (!finitePositive(status_period_s)) err << "status_period_s must be positive; ";
+  if (!finitePositive(max_stamp_lead_s)) err << "max_stamp_lead_s must be positive; ";
   const std::string s = err.str();
   if (why) *why = s.empty() ? "" : s.substr(0, s.size() - 2);
   return s.empty();
@@ -179,11 +181,13 @@ bool readMappingParams(const ros::NodeHandle& nh, MappingServer::Config* config)
   r.read("cloud/origin_from_pose", c.cloud_origin_from_pose);
   r.readVector3("cloud/sensor_origin_m", c.cloud_sensor_origin_m);
   r.read("cloud/max_pose_age_s", c.cloud_max_pose_age_s);
+  r.read("cloud/max_points", c.cloud_max_points);
 
   r.read("publish/occupancy_rate_hz", c.occupancy_publish_rate_hz);
   r.read("publish/esdf_rate_hz", c.esdf_publish_rate_hz);
   r.read("publish/esdf_slice_height_m", c.esdf_slice_height_m);
   r.read("status_period_s", c.status_period_s);
+  r.read("max_stamp_lead_s", c.max_stamp_lead_s);
 
   // The type errors and the range errors are reported together (a field with the wrong type kept
   // its default, so the range check of the rest is still meaningful).
@@ -492,6 +496,12 @@ void MappingServer::cloudCallback(const sensor_msgs::PointCloud2ConstPtr& cloud)
     ++frames_refused_;
     return;
   }
+  if (uint64_t(cloud->width) * cloud->height > uint64_t(config_.cloud_max_points)) {
+    ++frames_refused_;
+    ROS_WARN_THROTTLE(1.0, "mapping: point cloud of %u x %u points refused (cloud/max_points = %d)", cloud->width,
+                      cloud->height, config_.cloud_max_points);
+    return;
+  }
   Eigen::Vector3d origin = config_.cloud_sensor_origin_m;
   if (config_.cloud_origin_from_pose) {
     bool have_pose;
@@ -548,6 +558,13 @@ VoxelBox MappingServer::recenterLocked(const Eigen::Vector3d& p) {
 
 void MappingServer::integrate(const char* source, const ros::Time& stamp, const Eigen::Vector3d& sensor_position,
                               const std::function<FusionResult(OccupancyMap&)>& fuse) {
+  const double lead = stamp.toSec() - ros::Time::now().toSec();
+  if (lead > config_.max_stamp_lead_s) {
+    ++frames_refused_;
+    ROS_WARN_THROTTLE(1.0, "mapping: %s stamped %.3f s ahead of the clock refused (max_stamp_lead_s = %.2f)", source,
+                      lead, config_.max_stamp_lead_s);
+    return;
+  }
   std::unique_lock<std::shared_mutex> lock(map_mutex_);
   VoxelBox changed;
   if (config_.recenter_on_vehicle) changed = recenterLocked(sensor_position);

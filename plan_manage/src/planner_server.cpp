@@ -126,6 +126,7 @@ void PlannerServer::positionCmdCallback(const PositionCommandConstPtr& msg) {
   }
   ServerSetpoint sp;
   sp.stamp_s = msg->header.stamp.toSec();
+  sp.arrival_s = ros::Time::now().toSec();
   sp.position = Eigen::Vector3d(msg->position.x, msg->position.y, msg->position.z);
   sp.velocity = Eigen::Vector3d(msg->velocity.x, msg->velocity.y, msg->velocity.z);
   switch (msg->mode) {
@@ -140,14 +141,17 @@ void PlannerServer::positionCmdCallback(const PositionCommandConstPtr& msg) {
   }
   sp.own_session = msg->planner_session == session_;
   sp.trajectory_id = msg->trajectory_id;
-  fsm_->setServerSetpoint(sp);
+  if (!fsm_->setServerSetpoint(sp))
+    ROS_WARN_THROTTLE(5.0, "planner: position command ignored (non-finite, out of order, or stamped %.3f s ahead of "
+                      "the clock)",
+                      sp.stamp_s - sp.arrival_s);
 }
 
 void PlannerServer::goalCallback(const geometry_msgs::PoseStampedConstPtr& msg) {
   Eigen::Vector3d goal;
   std::string why;
   if (!goalFromMsg(*msg, config_.node.frame_id, config_.node.goal_height_m, &goal, &why)) {
-    ROS_WARN("planner: 2D Nav Goal ignored: %s", why.c_str());
+    ROS_WARN_THROTTLE(1.0, "planner: 2D Nav Goal ignored: %s", why.c_str());
     return;
   }
   submitGoals({goal}, "2D Nav Goal");
@@ -157,7 +161,7 @@ void PlannerServer::waypointsCallback(const nav_msgs::PathConstPtr& msg) {
   std::vector<Eigen::Vector3d> goals;
   std::string why;
   if (!goalsFromMsg(*msg, config_.node.frame_id, &goals, &why)) {
-    ROS_WARN("planner: waypoints ignored: %s", why.c_str());
+    ROS_WARN_THROTTLE(1.0, "planner: waypoints ignored: %s", why.c_str());
     return;
   }
   submitGoals(goals, "waypoints");
@@ -166,7 +170,7 @@ void PlannerServer::waypointsCallback(const nav_msgs::PathConstPtr& msg) {
 void PlannerServer::submitGoals(const std::vector<Eigen::Vector3d>& goals, const char* source) {
   const GoalStatus status = fsm_->setGoals(goals);
   if (status != GoalStatus::kAccepted) {
-    ROS_WARN("planner: %s refused: %s", source, toString(status));
+    ROS_WARN_THROTTLE(1.0, "planner: %s refused: %s", source, toString(status));
     return;
   }
   const Eigen::Vector3d& g = goals.back();

@@ -53,13 +53,22 @@ void TrajServer::bsplineCallback(const BsplineConstPtr& msg) {
 }
 
 void TrajServer::heartbeatCallback(const PlannerHeartbeatConstPtr& msg) {
-  // Liveness is the arrival (ROS time now, the time base of the samples), not the sender's stamp.
+  // Liveness is the arrival (ROS time now, the time base of the samples), not the sender's stamp;
+  // but a heartbeat in another frame or stamped further than the watchdog's timeout from now is no
+  // planner's of this clock (a stale or forged one must not keep the watchdog from stopping).
   const double now = ros::Time::now().toSec();
+  const double lag = now - msg->header.stamp.toSec();
+  if ((!msg->header.frame_id.empty() && msg->header.frame_id != config_.frame_id) || !std::isfinite(lag) ||
+      std::abs(lag) > config_.generator.heartbeat_timeout_s) {
+    ROS_WARN_THROTTLE(5.0, "traj_server: heartbeat ignored (frame '%s', stamped %.3f s from now)",
+                      msg->header.frame_id.c_str(), lag);
+    return;
+  }
   std::lock_guard<std::mutex> lock(mutex_);
   generator_.noteHeartbeat(now);
   if (have_heartbeat_ && msg->planner_session != heartbeat_session_)
-    ROS_INFO("traj_server: planner heartbeat from a new session %lu (planner restarted)",
-             (unsigned long)msg->planner_session);
+    ROS_INFO_THROTTLE(1.0, "traj_server: planner heartbeat from a new session %lu (planner restarted)",
+                      (unsigned long)msg->planner_session);
   heartbeat_session_ = msg->planner_session;
   have_heartbeat_ = true;
 }

@@ -348,11 +348,13 @@ bool ReplanFsm::setOdometry(double t, const Eigen::Vector3d& position, const Eig
   return true;
 }
 
-void ReplanFsm::setServerSetpoint(const ServerSetpoint& setpoint) {
-  if (!std::isfinite(setpoint.stamp_s) || !setpoint.position.allFinite() || !setpoint.velocity.allFinite()) return;
+bool ReplanFsm::setServerSetpoint(const ServerSetpoint& setpoint) {
+  if (!std::isfinite(setpoint.stamp_s) || !setpoint.position.allFinite() || !setpoint.velocity.allFinite()) return false;
   std::lock_guard<std::mutex> lock(mutex_);
-  if (server_ && setpoint.stamp_s < server_->stamp_s) return;  // out of order
+  if (std::isfinite(setpoint.arrival_s) && setpoint.stamp_s - setpoint.arrival_s > config_.server_timeout_s) return false;
+  if (server_ && setpoint.stamp_s < server_->stamp_s) return false;  // out of order
   server_ = setpoint;
+  return true;
 }
 
 bool ReplanFsm::followServerLocked(double t, const EsdfMap& map, FsmOutput* out) {
@@ -441,6 +443,9 @@ void ReplanFsm::setDepthFused(double stamp_s, double arrival_s) {
   if (std::isnan(arrival_s)) arrival_s = stamp_s;
   if (!std::isfinite(stamp_s) || !std::isfinite(arrival_s)) return;
   std::lock_guard<std::mutex> lock(mutex_);
+  // Stamped ahead of its arrival (another time base, a forged stamp): taken, every later frame would
+  // look older than it, and depth stale.
+  if (stamp_s - arrival_s > config_.odom_max_age_s) return;
   // The caller may pass the same (last) frame again and again; only a new one counts. Its arrival is
   // history, not the clock, so it does not feed the time-jump detection.
   if (have_raw_depth_ && stamp_s == raw_depth_stamp_s_) return;

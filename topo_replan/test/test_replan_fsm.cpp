@@ -1458,6 +1458,44 @@ TEST(ReplanFsm, RefusesOdometryStampedAheadOfTheClock) {
   EXPECT_TRUE(fsm->setOdometry(3.635, {1, 1, 1}, Eigen::Vector3d::Zero(), 3.64, &why)) << why;
 }
 
+// A setpoint stamped far ahead of its arrival (a forged or skewed stamp) is refused: taken, it would
+// make every later setpoint of the server look out of order.
+TEST(ReplanFsm, RefusesServerSetpointsStampedAheadOfTheClock) {
+  auto fsm = makeFsm();
+  ServerSetpoint sp;
+  sp.mode = ServerSetpoint::Mode::kHold;
+  sp.stamp_s = 3600.0;
+  sp.arrival_s = 10.0;
+  EXPECT_FALSE(fsm->setServerSetpoint(sp));
+  sp.stamp_s = 10.0;
+  EXPECT_TRUE(fsm->setServerSetpoint(sp));
+  sp.stamp_s = 10.05;
+  sp.arrival_s = NAN;  // no arrival time: the stamp is taken as it
+  EXPECT_TRUE(fsm->setServerSetpoint(sp));
+  sp.stamp_s = 10.02;  // out of order
+  EXPECT_FALSE(fsm->setServerSetpoint(sp));
+  sp.stamp_s = 11.0;
+  sp.position.x() = NAN;
+  EXPECT_FALSE(fsm->setServerSetpoint(sp));
+}
+
+// A depth frame stamped far ahead of its arrival is not taken: it would make every later frame look
+// older than it, and depth stale for an hour (found by hostile_traffic.test).
+TEST(ReplanFsm, RefusesDepthStampedAheadOfItsArrival) {
+  ReplanFsm::Config config = testConfig();
+  config.depth_timeout_s = 0.5;
+  auto fsm = makeFsm(config);
+  ASSERT_TRUE(fsm->setOdometry(10.0, {1, 4, 1.5}, Eigen::Vector3d::Zero()));
+  fsm->setDepthFused(3610.0, 10.0);
+  EXPECT_FALSE(fsm->inputHealth(10.0).ok);
+  EXPECT_EQ(fsm->inputHealth(10.0).depth_age_s, -1.0);  // never
+  fsm->setDepthFused(9.95, 10.0);
+  EXPECT_TRUE(fsm->inputHealth(10.0).ok) << fsm->inputHealth(10.0).why;
+  fsm->setDepthFused(10.02, 10.05);
+  ASSERT_TRUE(fsm->setOdometry(10.05, {1, 4, 1.5}, Eigen::Vector3d::Zero()));
+  EXPECT_NEAR(fsm->inputHealth(10.05).depth_age_s, 0.03, 1e-9);
+}
+
 TEST(ReplanFsm, InvalidConfigIsRefused) {
   ReplanFsm::Config c = testConfig();
   c.brake_acc_mps2 = 0.0;

@@ -71,6 +71,13 @@ void ControllerServer::commandCallback(const topo_planner::PositionCommandConstP
     ROS_WARN_THROTTLE(1.0, "geometric_controller: refusing a position command with NaN/inf; keeping the last one");
     return;
   }
+  const double offset = (msg->header.stamp - ros::Time::now()).toSec();
+  if ((!msg->header.frame_id.empty() && !world_frame_.empty() && msg->header.frame_id != world_frame_) ||
+      (!msg->header.stamp.isZero() && std::abs(offset) > kMaxStampOffsetS)) {
+    ROS_WARN_THROTTLE(1.0, "geometric_controller: refusing a position command in frame '%s' stamped %.3f s from now; "
+                      "keeping the last one", msg->header.frame_id.c_str(), offset);
+    return;
+  }
   if (holding_) ROS_INFO("geometric_controller: position commands are back");
   holding_ = false;
   reference_ = ref;
@@ -89,14 +96,20 @@ void ControllerServer::odomCallback(const nav_msgs::OdometryConstPtr& msg) {
     return;
   }
   const ros::Time now = ros::Time::now();
+  if (msg->header.stamp.isZero() || std::abs((msg->header.stamp - now).toSec()) > kMaxStampOffsetS) {
+    ROS_WARN_THROTTLE(1.0, "geometric_controller: refusing odometry stamped %.3f s from now",
+                      (msg->header.stamp - now).toSec());
+    return;
+  }
+  if (world_frame_.empty()) world_frame_ = msg->header.frame_id;
   if (!last_odom_stamp_.isZero() && have_command_) {
     const double interval = (msg->header.stamp - last_odom_stamp_).toSec();
     if (interval < 0.0 || interval > config_.max_odom_interval_s) {
       // A ROS time step (or an odometry gap): keep the command's age as it was at the last odometry.
       const double age = std::max(0.0, (last_odom_stamp_ - command_time_).toSec());
       command_time_ = now.toSec() > age ? now - ros::Duration(age) : ros::Time(0, 1);
-      ROS_WARN("geometric_controller: odometry stamps moved by %.3f s: a time step or a gap; command age kept at %.2f s",
-               interval, age);
+      ROS_WARN_THROTTLE(1.0, "geometric_controller: odometry stamps moved by %.3f s: a time step or a gap; command "
+                        "age kept at %.2f s", interval, age);
     }
   }
   last_odom_stamp_ = msg->header.stamp;

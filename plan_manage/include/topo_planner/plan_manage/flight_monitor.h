@@ -186,6 +186,7 @@ class FlightMonitor {
 
   bool have_odom_ = false;
   double last_odom_t_s_ = 0.0;
+  double last_setpoint_t_s_ = -1e300;  // time of the last setpoint taken [s]
   double ready_since_s_ = -1.0;  // negative while not ready
   double goal_sent_t_s_ = 0.0;
   TimeStepFilter clock_;              // ROS time steps out of the monitor's time

@@ -63,10 +63,12 @@
 //   cloud/origin_from_pose      true      sensor origin of a cloud = latest camera position
 //   cloud/sensor_origin_m       [0, 0, 0] the fixed sensor origin otherwise [m]
 //   cloud/max_pose_age_s        0.2       refuse a cloud whose latest pose is older/newer than this [s]
+//   cloud/max_points            2000000   refuse a cloud with more points (width x height) than this
 //   publish/occupancy_rate_hz   1.0       ~occupancy and ~occupancy_inflated; 0 = off [Hz]
 //   publish/esdf_rate_hz        1.0       ~esdf_slice; 0 = off [Hz]
 //   publish/esdf_slice_height_m 1.0       height of the slice (inside the window) [m]
 //   status_period_s             5.0       period of the ROS_INFO status line [s]
+//   max_stamp_lead_s            0.5       refuse a frame (image or cloud) stamped further ahead of the clock [s]
 //
 // Bad input (NaN/inf or non-unit poses, wrong encodings, empty, oversized or truncated images,
 // size different from the intrinsics, poses/clouds in another frame, stamps past 2^31 s) is
@@ -137,6 +139,7 @@ class MappingServer {
     bool cloud_origin_from_pose = true;  ///< sensor origin of a cloud = latest camera position
     Eigen::Vector3d cloud_sensor_origin_m = Eigen::Vector3d::Zero();  ///< fixed origin otherwise [m]
     double cloud_max_pose_age_s = 0.2;   ///< refuse a cloud whose latest pose is further away in time [s]
+    int cloud_max_points = 2000000;      ///< refuse a cloud with more points than this (width x height)
 
     std::string map_file;             ///< .bt/.ot/.pcd loaded at start; empty = none
     bool recenter_on_vehicle = false;   ///< keep the window centred (x, y) on the sensor
@@ -146,6 +149,9 @@ class MappingServer {
     double esdf_publish_rate_hz = 1.0;       ///< ~esdf_slice; 0 = off [Hz]
     double esdf_slice_height_m = 1.0;        ///< height of ~esdf_slice [m]
     double status_period_s = 5.0;            ///< period of the status log line [s]
+    /// A frame stamped further ahead of the clock is refused: no sensor of this clock took it, and its
+    /// stamp would make every later frame look old to the planner [s].
+    double max_stamp_lead_s = 0.5;
 
     static Eigen::Isometry3d defaultBodyToCamera();
     /// True when every field (including the core configs) is in range; otherwise says why.

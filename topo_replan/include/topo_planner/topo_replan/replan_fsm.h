@@ -184,6 +184,7 @@ const char* toString(FsmEvent::Trigger trigger);
 struct ServerSetpoint {
   enum class Mode { kBeforeFirst, kTrajectory, kStopping, kHold };
   double stamp_s = 0.0;  ///< [s, caller's clock]
+  double arrival_s = NAN;  ///< when it arrived [s, caller's clock]; NaN: at stamp_s
   Eigen::Vector3d position = Eigen::Vector3d::Zero();
   Eigen::Vector3d velocity = Eigen::Vector3d::Zero();
   Mode mode = Mode::kTrajectory;  ///< kStopping: a stop of its own (watchdog, or a trajectory that ended moving)
@@ -317,12 +318,16 @@ class ReplanFsm {
   bool setOdometry(double t, const Eigen::Vector3d& position, const Eigen::Vector3d& velocity,
                    double arrival_s = NAN, std::string* why = nullptr);
   /// The mapping fused a depth frame (or cloud) stamped stamp_s, at arrival_s (NaN: at stamp_s).
-  /// Passing the same stamp again is a no-op (the caller may poll the mapping's last frame).
+  /// Passing the same stamp again is a no-op (the caller may poll the mapping's last frame); so is a
+  /// stamp older than the newest or more than odom_max_age_s ahead of its arrival.
   void setDepthFused(double stamp_s, double arrival_s = NAN);
   /// Freshness of the inputs at clock t.
   InputHealth inputHealth(double t) const;
-  /// The trajectory server's latest setpoint (see the class comment). Non-finite values are ignored.
-  void setServerSetpoint(const ServerSetpoint& setpoint);
+  /// The trajectory server's latest setpoint (see the class comment). Non-finite values, setpoints
+  /// stamped before the last one and setpoints stamped more than server_timeout_s ahead of their
+  /// arrival (another time base, or a forged stamp: taken, it would hide every later one as out of
+  /// order) are ignored (false).
+  bool setServerSetpoint(const ServerSetpoint& setpoint);
   /// A new mission (replaces the current one): the goals are checked against the map and the
   /// reference is built at the next tick(); the status of that check is returned by tick() in
   /// FsmOutput::message and kept in lastGoalStatus(). Immediate refusal for no odometry or bad input.

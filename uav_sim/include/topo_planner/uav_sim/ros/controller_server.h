@@ -68,6 +68,11 @@ class ControllerServer {
   TrackingReference reference_;
   ros::Time command_time_;  // arrival of the latest valid command
   ros::Time last_odom_stamp_;  // stamp of the previous odometry
+  std::string world_frame_;    // the odometry's frame: position commands in another one are refused
+  /// Odometry and commands stamped further than this from the clock (or not stamped) are no state or
+  /// command of this clock; a ROS time step of a few seconds, whose stamps may arrive before the
+  /// clock's, is not refused [s].
+  static constexpr double kMaxStampOffsetS = 10.0;
   uint64_t commands_ = 0;
   ros::Subscriber odom_sub_, command_sub_;
   ros::Publisher rotor_pub_;
