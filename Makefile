@@ -6,7 +6,7 @@ WS := $(ROOT)/build/ws
 CATKIN_ARGS := -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=Release
 BIN = $(1)/devel/lib/topo_planner
 
-.PHONY: deps build test bench bench-env bench-topo bench-opt bench-replan bench-forest-gen bench-camera bench-flight bench-flight-forests bench-faults demo map-demo test-asan test-tsan fuzz clean
+.PHONY: deps build test bench bench-env bench-topo bench-opt bench-replan bench-forest-gen bench-camera bench-flight bench-flight-forests bench-faults soak demo map-demo test-asan test-tsan fuzz clean
 
 deps:
 	@bash scripts/install_deps.sh
@@ -90,6 +90,14 @@ bench-flight-forests: build
 bench-faults: build
 	@mkdir -p results
 	WS=$(WS) /usr/bin/python3 scripts/bench_faults.py --out $(ROOT)/results $(BENCH_ARGS)
+
+# Soak (scripts/soak.py): one continuous simulated mission of 30 simulated minutes through a seeded
+# high-density forest (goals cycling between its ends), in simulated time at 1.5x real time; every
+# node's memory and CPU sampled every 10 s: results/soak/soak.md and a RESULT line. About 20 minutes;
+# not in CI. SOAK_ARGS=--minutes 5 for a short one.
+soak: build
+	@mkdir -p results/soak
+	cd $(WS) && . devel/setup.sh && /usr/bin/python3 $(ROOT)/scripts/soak.py --out $(ROOT)/results/soak $(SOAK_ARGS)
 
 # The tests under AddressSanitizer + UBSan, and under ThreadSanitizer, in their own workspaces.
 # Any sanitizer report stops the test that hit it, so it counts as a failure.

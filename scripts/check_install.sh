@@ -24,13 +24,6 @@ WORK=$(cd "$WORK" && pwd)
 PREFIX=$(sed -n 's/^CMAKE_INSTALL_PREFIX:PATH=//p' "$BUILD/CMakeCache.txt")
 LOG=$WORK/install.log
 
-declare -a names
-declare -A status message
-record() {  # name, pass|fail, message
-  names+=("$1")
-  status[$1]=$2
-  message[$1]=$3
-}
 # Runs a command in a clean environment with only the install space sourced.
 in_install() {
   env -i HOME="$HOME" PATH=/usr/local/bin:/usr/bin:/bin LANG=C.UTF-8 bash -c "source '$PREFIX/setup.bash' && $1"
@@ -89,10 +82,4 @@ if [ "${status[install]}" = pass ]; then
   fi
 fi
 
-failures=0
-for name in "${names[@]}"; do
-  echo "install space, $name: ${status[$name]}: ${message[$name]}"
-  [ "${status[$name]}" = pass ] || failures=$((failures + 1))
-done
-[ -n "$XUNIT" ] && write_junit "$XUNIT" install_space "${names[@]}"
-[ "$failures" -eq 0 ]
+finish_checks "install space" install_space "$XUNIT"

@@ -26,7 +26,6 @@ mkdir -p "$WORK"
 WORK=$(cd "$WORK" && pwd)
 JOBS=${JOBS:-2}
 
-declare -A status message
 run_case() {  # name, then the build commands (run in a clean environment in the workspace)
   local name=$1 build=$2
   local ws=$WORK/$name log=$WORK/$name.log
@@ -79,10 +78,5 @@ else
   message[catkin_build]="catkin build (Debian package catkin-tools) is not installed"
 fi
 
-failures=0
-for name in catkin_make catkin_build; do
-  echo "name clash, $name: ${status[$name]}: ${message[$name]}"
-  [ "${status[$name]}" = pass ] || failures=$((failures + 1))
-done
-[ -n "$XUNIT" ] && write_junit "$XUNIT" name_clash catkin_make catkin_build
-[ "$failures" -eq 0 ]
+names=(catkin_make catkin_build)
+finish_checks "name clash" name_clash "$XUNIT"

@@ -30,13 +30,6 @@ source "$SETUP"
 set -u
 export ROS_HOSTNAME=127.0.0.1 ROS_LOG_DIR=$WORK/ros_log
 
-declare -a names
-declare -A status message
-record() {  # name, pass|fail, message
-  names+=("$1")
-  status[$1]=$2
-  message[$1]=$3
-}
 free_port() { /usr/bin/python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])'; }
 # Waits (at most $2 s) until the master on port $1 answers.
 wait_master() {
@@ -137,10 +130,4 @@ if [ "${status[record]}" = pass ]; then
   fi
 fi
 
-failures=0
-for name in "${names[@]}"; do
-  echo "record and replay, $name: ${status[$name]}: ${message[$name]}"
-  [ "${status[$name]}" = pass ] || failures=$((failures + 1))
-done
-[ -n "$XUNIT" ] && write_junit "$XUNIT" record_replay "${names[@]}"
-[ "$failures" -eq 0 ]
+finish_checks "record and replay" record_replay "$XUNIT"
