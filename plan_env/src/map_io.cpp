@@ -248,7 +248,7 @@ MapStatus readOctomapFile(const std::string& path, MapFile* out, std::string* er
 
 MapStatus readPcdFile(const std::string& path, MapFile* out, std::string* error) {
   if (!fileReadable(path)) return fail(MapStatus::kFileNotFound, "cannot open '" + path + "'", error);
-  pcl::PointCloud<pcl::PointXYZ> cloud;
+  pcl::PCLPointCloud2 blob;
   try {
     // PCL 1.13 reads past the end on files without a valid header (it crashes on garbage), so
     // the header is checked first: it must declare x, y and z fields.
@@ -263,16 +263,43 @@ MapStatus readPcdFile(const std::string& path, MapFile* out, std::string* error)
     int xyz = 0;
     for (const auto& field : header.fields) xyz += field.name == "x" || field.name == "y" || field.name == "z";
     if (xyz != 3) return fail(MapStatus::kParseError, "'" + path + "' has no x, y, z fields", error);
-    if (size_t(header.width) * header.height > 0 && reader.read(path, cloud) < 0)
+    if (size_t(header.width) * header.height > 0 && reader.read(path, blob) < 0)
       return fail(MapStatus::kParseError, "'" + path + "' is not a readable PCD file", error);
   } catch (const std::exception& e) {
     return fail(MapStatus::kParseError, "PCL could not read '" + path + "': " + e.what(), error);
   }
+  // The points are taken from PCL's blob here rather than by pcl::fromPCLPointCloud2, which trusts
+  // the header: a file whose fields lie outside a point, or whose data holds fewer bytes than its
+  // WIDTH x HEIGHT points, made it read past the buffer (pcd fuzz harness, ASan). So every x, y, z
+  // must be a float inside a point and every point inside the data. Sizes are 32-bit in PCL:
+  // their products fit in 64 bits.
+  const uint64_t width = blob.width, height = blob.height, point_step = blob.point_step, row_step = blob.row_step;
   MapFile file;
-  file.cells.reserve(cloud.size());
-  for (const pcl::PointXYZ& p : cloud) {
-    const Eigen::Vector3d c(p.x, p.y, p.z);
-    if (c.allFinite()) file.cells.push_back({c, 0.0, true});
+  if (width * height > 0) {
+    uint64_t offset[3];
+    bool found[3] = {false, false, false};
+    for (const pcl::PCLPointField& f : blob.fields) {
+      const int axis = f.name == "x" ? 0 : f.name == "y" ? 1 : f.name == "z" ? 2 : -1;
+      if (axis < 0) continue;
+      if (f.datatype != pcl::PCLPointField::FLOAT32 || f.count < 1 || uint64_t(f.offset) + sizeof(float) > point_step)
+        return fail(MapStatus::kParseError, "'" + path + "': field " + f.name + " is not a float inside a point", error);
+      offset[axis] = f.offset;
+      found[axis] = true;
+    }
+    if (!(found[0] && found[1] && found[2]))
+      return fail(MapStatus::kParseError, "'" + path + "' has no x, y, z fields", error);
+    if (width * point_step > row_step || height * row_step > blob.data.size())
+      return fail(MapStatus::kParseError, "'" + path + "' holds fewer bytes than its " + std::to_string(width) + " x " +
+                                              std::to_string(height) + " points", error);
+    file.cells.reserve(size_t(width * height));
+    for (uint64_t r = 0; r < height; ++r)
+      for (uint64_t i = 0; i < width; ++i) {
+        const uint8_t* point = blob.data.data() + r * row_step + i * point_step;
+        float xyz[3];
+        for (int a = 0; a < 3; ++a) std::memcpy(&xyz[a], point + offset[a], sizeof(float));
+        const Eigen::Vector3d c(xyz[0], xyz[1], xyz[2]);
+        if (c.allFinite()) file.cells.push_back({c, 0.0, true});
+      }
   }
   computeBounds(&file);
   *out = std::move(file);

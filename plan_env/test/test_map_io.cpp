@@ -3,6 +3,7 @@
 
 #include <cstdio>
 #include <fstream>
+#include <iterator>
 #include <random>
 
 #include "topo_planner/plan_env/map_io.h"
@@ -173,6 +174,35 @@ TEST(MapIo, OctomapTruncatedNodeStreamIsRefused) {
     EXPECT_EQ(readBytes(wrong, binary ? "bt" : "ot", &file, &err), MapStatus::kParseError);
     EXPECT_NE(err.find("declares 13 nodes"), std::string::npos) << err;
   }
+}
+
+// A PCD file whose ASCII body PCL keeps in fewer bytes than its WIDTH x HEIGHT points (found by the
+// pcd fuzz harness: pcl::fromPCLPointCloud2 read past the buffer) is refused, not read as points.
+TEST(MapIo, PcdWithFewerBytesThanPointsIsRefused) {
+  const std::string path =
+      std::string(TOPO_PLANNER_TEST_DATA_DIR) + "/../fuzz/regressions/pcd/ascii_body_shorter_than_points";
+  std::ifstream in(path, std::ios::binary);
+  ASSERT_TRUE(in.good()) << path;
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  MapFile file;
+  std::string err;
+  ASSERT_EQ(readBytes(bytes, "pcd", &file, &err), MapStatus::kParseError);
+  EXPECT_NE(err.find("holds fewer bytes than its 4 x 1 points"), std::string::npos) << err;
+  EXPECT_TRUE(file.cells.empty());
+}
+
+// x, y, z must be floats inside a point (a field past the point's end was read past the data).
+TEST(MapIo, PcdFieldsOutsideAPointOrNotFloatAreRefused) {
+  const std::string body = "WIDTH 2\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n1 2 3\n4 5 6\n";
+  MapFile file;
+  std::string err;
+  EXPECT_EQ(readBytes("VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n" + body, "pcd", &file, &err),
+            MapStatus::kSuccess) << err;
+  EXPECT_EQ(file.cells.size(), 2u);
+  EXPECT_EQ(file.cells[1].center, Eigen::Vector3d(4, 5, 6));
+  EXPECT_EQ(readBytes("VERSION 0.7\nFIELDS x y z\nSIZE 8 8 8\nTYPE F F F\nCOUNT 1 1 1\n" + body, "pcd", &file, &err),
+            MapStatus::kParseError);
+  EXPECT_NE(err.find("is not a float inside a point"), std::string::npos) << err;
 }
 
 }  // namespace
