@@ -205,5 +205,31 @@ TEST(MapIo, PcdFieldsOutsideAPointOrNotFloatAreRefused) {
   EXPECT_NE(err.find("is not a float inside a point"), std::string::npos) << err;
 }
 
+// PCL allocates the points a header declares before reading them (pcd fuzz harness: 4 GB for a
+// small file): a header declaring more points than the data can hold is refused first.
+TEST(MapIo, PcdDeclaringMorePointsThanItsDataIsRefused) {
+  const std::string head = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n";
+  for (const std::string& body : {std::string("WIDTH 1000000000\nHEIGHT 4\nVIEWPOINT 0 0 0 1 0 0 0\n"
+                                              "POINTS 4000000000\nDATA binary\n") + std::string(24, '\0'),
+                                  std::string("WIDTH 3\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 3\nDATA ascii\n1 2\n")}) {
+    MapFile file;
+    std::string err;
+    EXPECT_EQ(readBytes(head + body, "pcd", &file, &err), MapStatus::kParseError);
+    EXPECT_NE(err.find("bytes of data hold"), std::string::npos) << err;
+  }
+  // binary_compressed: the uncompressed size written in the data must be the declared points'.
+  std::ifstream in(std::string(TOPO_PLANNER_TEST_DATA_DIR) + "/../fuzz/corpus/pcd/binary_compressed", std::ios::binary);
+  std::string compressed((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  MapFile file;
+  std::string err;
+  ASSERT_EQ(readBytes(compressed, "pcd", &file, &err), MapStatus::kSuccess) << err;  // written by PCL
+  EXPECT_FALSE(file.cells.empty());
+  const size_t data = compressed.find("DATA binary_compressed\n") + 23;
+  ASSERT_LT(data + 8, compressed.size());
+  compressed.replace(data + 4, 4, std::string("\xff\xff\xff\xff", 4));  // uncompressed size 4 GB
+  EXPECT_EQ(readBytes(compressed, "pcd", &file, &err), MapStatus::kParseError);
+  EXPECT_NE(err.find("compressed data of the wrong size"), std::string::npos) << err;
+}
+
 }  // namespace
 }  // namespace topo_planner
