@@ -35,7 +35,7 @@ n=0
 for t in $targets; do
   exe=$ws/devel/lib/topo_planner/${t}_fuzzer
   dir=$out/$t
-  rm -rf "$dir/corpus" && mkdir -p "$dir/corpus" "$dir/crashes"
+  rm -rf "$dir/corpus" "$dir/crashes" && mkdir -p "$dir/corpus" "$dir/crashes"  # crashes: this run's only
   cp "$root/test/fuzz/corpus/$t/"* "$dir/corpus/"
   seeds=$(ls "$dir/corpus" | wc -l)
   echo "fuzz: $t for ${FUZZ_S} s ($seeds seeds; log $dir/fuzz.log)"

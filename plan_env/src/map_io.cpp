@@ -7,6 +7,7 @@
 #include <bitset>
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <iterator>
@@ -176,6 +177,47 @@ bool walkOctomapNodes(const std::string& bytes, size_t begin, bool binary, unsig
   return true;
 }
 
+// Bytes of point data a PCD header declares (points x point step), read from its lines as PCL
+// reads them (WIDTH, HEIGHT, POINTS, SIZE, COUNT up to DATA; the largest value where a keyword
+// repeats, so that this bounds what PCL allocates). PCL's readHeader allocates that much before it
+// reads a single point: a header of a billion points allocated gigabytes (pcd fuzz harness).
+double pcdDeclaredBytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::string line;
+  double width = 0.0, height = 0.0, points = 0.0;
+  std::vector<double> sizes, counts;
+  auto values = [](std::istringstream& row) {
+    std::vector<double> v;
+    std::string token;
+    while (row >> token) {
+      char* end = nullptr;
+      const double x = std::strtod(token.c_str(), &end);
+      v.push_back(end != token.c_str() && std::isfinite(x) ? std::abs(x) : 0.0);
+    }
+    return v;
+  };
+  auto keepLargest = [](std::vector<double>* into, const std::vector<double>& v) {
+    if (into->size() < v.size()) into->resize(v.size(), 0.0);
+    for (size_t i = 0; i < v.size(); ++i) (*into)[i] = std::max((*into)[i], v[i]);
+  };
+  while (std::getline(in, line)) {
+    std::istringstream row(line);
+    std::string key;
+    if (!(row >> key)) continue;
+    if (key == "DATA") break;
+    const std::vector<double> v = values(row);
+    const double first = v.empty() ? 0.0 : v[0];
+    if (key == "WIDTH") width = std::max(width, first);
+    if (key == "HEIGHT") height = std::max(height, first);
+    if (key == "POINTS") points = std::max(points, first);
+    if (key == "SIZE") keepLargest(&sizes, v);
+    if (key == "COUNT") keepLargest(&counts, v);
+  }
+  double step = 0.0;
+  for (size_t i = 0; i < sizes.size(); ++i) step += sizes[i] * std::max(1.0, i < counts.size() ? counts[i] : 1.0);
+  return std::max(points, width * height) * std::max(step, 1.0);
+}
+
 }  // namespace
 
 size_t MapFile::numOccupied() const {
@@ -248,10 +290,14 @@ MapStatus readOctomapFile(const std::string& path, MapFile* out, std::string* er
 
 MapStatus readPcdFile(const std::string& path, MapFile* out, std::string* error) {
   if (!fileReadable(path)) return fail(MapStatus::kFileNotFound, "cannot open '" + path + "'", error);
-  pcl::PointCloud<pcl::PointXYZ> cloud;
+  pcl::PCLPointCloud2 blob;
   try {
     // PCL 1.13 reads past the end on files without a valid header (it crashes on garbage), so
     // the header is checked first: it must declare x, y and z fields.
+    std::ifstream size_probe(path, std::ios::binary | std::ios::ate);
+    const uint64_t file_bytes = uint64_t(std::max<std::streamoff>(0, size_probe.tellg()));
+    if (pcdDeclaredBytes(path) > 100.0 * double(file_bytes) + 1e6)
+      return fail(MapStatus::kParseError, "'" + path + "' declares more points than its bytes of data hold", error);
     pcl::PCDReader reader;
     pcl::PCLPointCloud2 header;
     Eigen::Vector4f origin;
@@ -263,16 +309,65 @@ MapStatus readPcdFile(const std::string& path, MapFile* out, std::string* error)
     int xyz = 0;
     for (const auto& field : header.fields) xyz += field.name == "x" || field.name == "y" || field.name == "z";
     if (xyz != 3) return fail(MapStatus::kParseError, "'" + path + "' has no x, y, z fields", error);
-    if (size_t(header.width) * header.height > 0 && reader.read(path, cloud) < 0)
+    // The exact bound once PCL has parsed the header (the one above allows for compression and
+    // small files; PCL's body readers allocate the points again). The data must fit the file: binary points
+    // take point_step bytes, ASCII ones at least a digit and a line end, compressed ones at least
+    // 1/100 of their size (LZF expands a 3-byte back reference to at most 264 bytes).
+    const uint64_t points = uint64_t(header.width) * header.height, point_bytes = points * header.point_step;
+    const uint64_t data_bytes = file_bytes - std::min<uint64_t>(file_bytes, data_index);
+    const bool fits = data_type == 0 ? 2 * points <= data_bytes
+                                     : data_type == 1 ? point_bytes <= data_bytes : point_bytes <= 100 * data_bytes;
+    if (!fits)
+      return fail(MapStatus::kParseError, "'" + path + "' declares " + std::to_string(points) +
+                                              " points, more than its " + std::to_string(data_bytes) + " bytes of data hold",
+                  error);
+    if (data_type == 2 && points > 0) {
+      // binary_compressed: two uint32 (compressed, uncompressed size) lead the data, and PCL
+      // allocates the uncompressed size as written (4 GB in the pcd fuzz harness).
+      uint32_t sizes[2] = {0, 0};
+      std::ifstream in(path, std::ios::binary);
+      in.seekg(std::streamoff(data_index));
+      if (!in.read(reinterpret_cast<char*>(sizes), sizeof(sizes)) || sizes[1] != point_bytes ||
+          uint64_t(sizes[0]) + sizeof(sizes) > data_bytes)
+        return fail(MapStatus::kParseError, "'" + path + "' has compressed data of the wrong size", error);
+    }
+    if (points > 0 && reader.read(path, blob) < 0)
       return fail(MapStatus::kParseError, "'" + path + "' is not a readable PCD file", error);
   } catch (const std::exception& e) {
     return fail(MapStatus::kParseError, "PCL could not read '" + path + "': " + e.what(), error);
   }
+  // The points are taken from PCL's blob here rather than by pcl::fromPCLPointCloud2, which trusts
+  // the header: a file whose fields lie outside a point, or whose data holds fewer bytes than its
+  // WIDTH x HEIGHT points, made it read past the buffer (pcd fuzz harness, ASan). So every x, y, z
+  // must be a float inside a point and every point inside the data. Sizes are 32-bit in PCL:
+  // their products fit in 64 bits.
+  const uint64_t width = blob.width, height = blob.height, point_step = blob.point_step, row_step = blob.row_step;
   MapFile file;
-  file.cells.reserve(cloud.size());
-  for (const pcl::PointXYZ& p : cloud) {
-    const Eigen::Vector3d c(p.x, p.y, p.z);
-    if (c.allFinite()) file.cells.push_back({c, 0.0, true});
+  if (width * height > 0) {
+    uint64_t offset[3];
+    bool found[3] = {false, false, false};
+    for (const pcl::PCLPointField& f : blob.fields) {
+      const int axis = f.name == "x" ? 0 : f.name == "y" ? 1 : f.name == "z" ? 2 : -1;
+      if (axis < 0) continue;
+      if (f.datatype != pcl::PCLPointField::FLOAT32 || f.count < 1 || uint64_t(f.offset) + sizeof(float) > point_step)
+        return fail(MapStatus::kParseError, "'" + path + "': field " + f.name + " is not a float inside a point", error);
+      offset[axis] = f.offset;
+      found[axis] = true;
+    }
+    if (!(found[0] && found[1] && found[2]))
+      return fail(MapStatus::kParseError, "'" + path + "' has no x, y, z fields", error);
+    if (width * point_step > row_step || height * row_step > blob.data.size())
+      return fail(MapStatus::kParseError, "'" + path + "' holds fewer bytes than its " + std::to_string(width) + " x " +
+                                              std::to_string(height) + " points", error);
+    file.cells.reserve(size_t(width * height));
+    for (uint64_t r = 0; r < height; ++r)
+      for (uint64_t i = 0; i < width; ++i) {
+        const uint8_t* point = blob.data.data() + r * row_step + i * point_step;
+        float xyz[3];
+        for (int a = 0; a < 3; ++a) std::memcpy(&xyz[a], point + offset[a], sizeof(float));
+        const Eigen::Vector3d c(xyz[0], xyz[1], xyz[2]);
+        if (c.allFinite()) file.cells.push_back({c, 0.0, true});
+      }
   }
   computeBounds(&file);
   *out = std::move(file);

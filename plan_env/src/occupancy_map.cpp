@@ -223,10 +223,15 @@ void OccupancyMap::castRay(const Eigen::Vector3d& origin, const Eigen::Vector3d&
                            FusionResult* result) {
   const uint32_t mark_free = frame_ << 1;
   const uint32_t mark_hit = mark_free | 1u;
+  // A ray whose end is not finite carries no information (degenerate intrinsics: a direction of
+  // infinite norm scaled by zero gives NaN), and its clipping would be NaN too.
+  if (!origin.allFinite() || !end.allFinite()) return;
   // Most rays of a frame end in a voxel an earlier ray already ended in (hit) or freed (max-range
   // ray with merging): they would stop at their first voxel, so skip the clipping and DDA set-up.
-  const Eigen::Vector3i end_index = geometry_.indexOf(end);
-  if (geometry_.inWindow(end_index)) {
+  // The end's index only when it lies in the window: the int cast of a far end is undefined
+  // (found by the depth_image and pointcloud2 fuzz harnesses).
+  if (geometry_.inWindow(end)) {
+    const Eigen::Vector3i end_index = geometry_.indexOf(end);
     const uint32_t s = stamp_[geometry_.address(end_index)];
     if ((is_hit && s == mark_hit) || (!is_hit && config_.merge_rays && s == mark_free)) return;
   }

@@ -111,6 +111,40 @@ TEST_F(BadInput, InvalidIntrinsics) {
   expectUnchanged();
 }
 
+// Focal lengths that are positive and finite but so small that (u - cx) / fx overflows: every ray
+// of infinite depth (max range) then ends at NaN (infinity times zero). Such rays carry nothing
+// (found by the depth_image fuzz harness, an undefined NaN-to-int cast; the clipping let them
+// through as the whole window).
+TEST_F(BadInput, RaysThatEndAtNaNAreIgnored) {
+  PinholeCamera c = cam_;
+  c.fx = c.fy = 1e-310;
+  c.cx += 0.25;  // no pixel on the optical axis
+  c.cy += 0.25;
+  std::vector<float> far(depth_.size(), std::numeric_limits<float>::infinity());
+  const FusionResult r = map_->fuseDepthImage(test::viewOf(far, c), c, T_);
+  EXPECT_EQ(r.status, MapStatus::kOutOfMap);
+  EXPECT_EQ(r.rays, 0);
+  expectUnchanged();
+}
+
+// Points far beyond the int range of voxel indices, within a long max range: the ray is clipped to
+// the window like any other (pointcloud2 fuzz harness: the end's index was cast to int first).
+TEST(BadPoints, FarPointsAreClippedToTheWindow) {
+  OccupancyMap::Config c;
+  c.size_m = {2.0, 2.0, 2.0};
+  c.origin_m = {-1.0, -1.0, -1.0};
+  c.max_ray_length_m = 1e308;
+  std::string err;
+  auto map = OccupancyMap::create(c, &err);
+  ASSERT_TRUE(map) << err;
+  const FusionResult r = map->fusePointCloud({{-1e150, 0.05, 0.05}}, {0.05, 0.05, 0.05});
+  EXPECT_EQ(r.status, MapStatus::kSuccess);
+  EXPECT_EQ(r.rays, 1);
+  // The free part inside the window, from the sensor to the border, and no hit.
+  EXPECT_EQ(map->state(map->geometry().indexOf({-0.95, 0.05, 0.05})), VoxelState::kFree);
+  EXPECT_EQ(map->countState(VoxelState::kOccupied), 0u);
+}
+
 TEST_F(BadInput, SensorOutsideTheMapLookingAway) {
   const auto T = test::cameraLookingAlongX({50.0, 0.0, 1.0});
   EXPECT_EQ(map_->fuseDepthImage(test::viewOf(depth_, cam_), cam_, T).status, MapStatus::kOutOfMap);

@@ -3,6 +3,7 @@
 
 #include <cstdio>
 #include <fstream>
+#include <iterator>
 #include <random>
 
 #include "topo_planner/plan_env/map_io.h"
@@ -173,6 +174,61 @@ TEST(MapIo, OctomapTruncatedNodeStreamIsRefused) {
     EXPECT_EQ(readBytes(wrong, binary ? "bt" : "ot", &file, &err), MapStatus::kParseError);
     EXPECT_NE(err.find("declares 13 nodes"), std::string::npos) << err;
   }
+}
+
+// A PCD file whose ASCII body PCL keeps in fewer bytes than its WIDTH x HEIGHT points (found by the
+// pcd fuzz harness: pcl::fromPCLPointCloud2 read past the buffer) is refused, not read as points.
+TEST(MapIo, PcdWithFewerBytesThanPointsIsRefused) {
+  const std::string path =
+      std::string(TOPO_PLANNER_TEST_DATA_DIR) + "/../fuzz/regressions/pcd/ascii_body_shorter_than_points";
+  std::ifstream in(path, std::ios::binary);
+  ASSERT_TRUE(in.good()) << path;
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  MapFile file;
+  std::string err;
+  ASSERT_EQ(readBytes(bytes, "pcd", &file, &err), MapStatus::kParseError);
+  EXPECT_NE(err.find("holds fewer bytes than its 4 x 1 points"), std::string::npos) << err;
+  EXPECT_TRUE(file.cells.empty());
+}
+
+// x, y, z must be floats inside a point (a field past the point's end was read past the data).
+TEST(MapIo, PcdFieldsOutsideAPointOrNotFloatAreRefused) {
+  const std::string body = "WIDTH 2\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n1 2 3\n4 5 6\n";
+  MapFile file;
+  std::string err;
+  EXPECT_EQ(readBytes("VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n" + body, "pcd", &file, &err),
+            MapStatus::kSuccess) << err;
+  EXPECT_EQ(file.cells.size(), 2u);
+  EXPECT_EQ(file.cells[1].center, Eigen::Vector3d(4, 5, 6));
+  EXPECT_EQ(readBytes("VERSION 0.7\nFIELDS x y z\nSIZE 8 8 8\nTYPE F F F\nCOUNT 1 1 1\n" + body, "pcd", &file, &err),
+            MapStatus::kParseError);
+  EXPECT_NE(err.find("is not a float inside a point"), std::string::npos) << err;
+}
+
+// PCL allocates the points a header declares before reading them (pcd fuzz harness: 4 GB for a
+// small file): a header declaring more points than the data can hold is refused first.
+TEST(MapIo, PcdDeclaringMorePointsThanItsDataIsRefused) {
+  const std::string head = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n";
+  for (const std::string& body : {std::string("WIDTH 1000000000\nHEIGHT 4\nVIEWPOINT 0 0 0 1 0 0 0\n"
+                                              "POINTS 4000000000\nDATA binary\n") + std::string(24, '\0'),
+                                  std::string("WIDTH 3\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 3\nDATA ascii\n1 2\n")}) {
+    MapFile file;
+    std::string err;
+    EXPECT_EQ(readBytes(head + body, "pcd", &file, &err), MapStatus::kParseError);
+    EXPECT_NE(err.find("bytes of data hold"), std::string::npos) << err;
+  }
+  // binary_compressed: the uncompressed size written in the data must be the declared points'.
+  std::ifstream in(std::string(TOPO_PLANNER_TEST_DATA_DIR) + "/../fuzz/corpus/pcd/binary_compressed", std::ios::binary);
+  std::string compressed((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  MapFile file;
+  std::string err;
+  ASSERT_EQ(readBytes(compressed, "pcd", &file, &err), MapStatus::kSuccess) << err;  // written by PCL
+  EXPECT_FALSE(file.cells.empty());
+  const size_t data = compressed.find("DATA binary_compressed\n") + 23;
+  ASSERT_LT(data + 8, compressed.size());
+  compressed.replace(data + 4, 4, std::string("\xff\xff\xff\xff", 4));  // uncompressed size 4 GB
+  EXPECT_EQ(readBytes(compressed, "pcd", &file, &err), MapStatus::kParseError);
+  EXPECT_NE(err.find("compressed data of the wrong size"), std::string::npos) << err;
 }
 
 }  // namespace

@@ -229,8 +229,8 @@ bool MappingServer::buildMaps(std::string* error) {
     return false;
   }
   const GridGeometry& g = occupancy_->geometry();
-  const int slice_z = g.indexOf(Eigen::Vector3d(0, 0, config_.esdf_slice_height_m)).z();
-  if (slice_z < g.originIndex().z() || slice_z >= g.originIndex().z() + g.size().z()) {
+  // In metres: the voxel index of a far height would not fit an int (params fuzz harness, 1.7e300 m).
+  if (!(config_.esdf_slice_height_m >= g.windowMin().z() && config_.esdf_slice_height_m < g.windowMax().z())) {
     if (error) {
       std::ostringstream s;
       s << "publish/esdf_slice_height_m = " << config_.esdf_slice_height_m << " is outside the map's z range ["
@@ -646,11 +646,13 @@ void MappingServer::publishEsdfSlice(const ros::TimerEvent&) {
     std::shared_lock<std::shared_mutex> lock(map_mutex_);
     const GridGeometry& g = occupancy_->geometry();
     const VoxelBox w = g.windowBox();
-    Eigen::Vector3i i = g.indexOf(Eigen::Vector3d(0, 0, config_.esdf_slice_height_m));
-    if (i.z() < w.min.z() || i.z() > w.max.z()) {  // buildMaps checked it, and z never moves
+    const double h = config_.esdf_slice_height_m;
+    if (!(h >= g.windowMin().z() && h < g.windowMax().z())) {  // buildMaps checked it, and z never moves
       ROS_WARN_THROTTLE(10.0, "mapping: ESDF slice height %.2f m is outside the map", config_.esdf_slice_height_m);
       return;
     }
+    Eigen::Vector3i i = g.indexOf(Eigen::Vector3d(0, 0, h));
+    i.z() = std::min(std::max(i.z(), w.min.z()), w.max.z());  // h a rounding below windowMax
     points.reserve(size_t(g.size().x()) * size_t(g.size().y()));
     distances.reserve(points.capacity());
     for (i.y() = w.min.y(); i.y() <= w.max.y(); ++i.y())

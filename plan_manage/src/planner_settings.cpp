@@ -8,7 +8,7 @@ namespace topo_planner {
 bool PlannerSettings::validate(std::string* why) const {
   std::ostringstream e;
   const auto period = [&](const char* name, double v) {
-    if (!(std::isfinite(v) && v > 0.0 && v <= kMaxPeriodS)) e << name << " must be in (0, " << kMaxPeriodS << "] s; ";
+    if (!(v >= kMinPeriodS && v <= kMaxPeriodS)) e << name << " must be in [" << kMinPeriodS << ", " << kMaxPeriodS << "] s; ";
   };
   period("plan_period_s", plan_period_s);
   period("safety_period_s", safety_period_s);

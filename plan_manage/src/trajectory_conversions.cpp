@@ -45,6 +45,14 @@ bool fromMsg(const Bspline& msg, ReceivedTrajectory* out, std::string* why) {
     if (why) *why = "order below 3 (no continuous acceleration)";
     return false;
   }
+  if (!(msg.knot_span_s >= kMinKnotSpanS && msg.knot_span_s <= kMaxKnotSpanS)) {
+    if (why) *why = "knot span outside [" + std::to_string(kMinKnotSpanS) + ", " + std::to_string(kMaxKnotSpanS) + "] s";
+    return false;
+  }
+  if (q.cwiseAbs().maxCoeff() > kMaxCoordinateM) {
+    if (why) *why = "control points beyond " + std::to_string(kMaxCoordinateM) + " m";
+    return false;
+  }
   std::optional<Eigen::Vector3d> heading_target;
   if (msg.has_heading_target) {
     heading_target = Eigen::Vector3d(msg.heading_target.x, msg.heading_target.y, msg.heading_target.z);

@@ -32,6 +32,7 @@ TEST(PlannerSettings, OutOfRangeFieldsAreRefusedByName) {
       {"plan_period_s", [](PlannerSettings* s) { s->plan_period_s = 0.0; }},
       {"plan_period_s", [](PlannerSettings* s) { s->plan_period_s = kNaN; }},
       {"plan_period_s", [](PlannerSettings* s) { s->plan_period_s = 1e10; }},  // beyond ros::Duration
+      {"plan_period_s", [](PlannerSettings* s) { s->plan_period_s = 1e-300; }},  // ros::Duration of 0
       {"safety_period_s", [](PlannerSettings* s) { s->safety_period_s = kInf; }},
       {"safety_period_s", [](PlannerSettings* s) { s->safety_period_s = -0.05; }},
       {"vis_sample_s", [](PlannerSettings* s) { s->vis_sample_s = 1e-300; }},  // T / dt overflowed int
@@ -55,6 +56,7 @@ TEST(PlannerSettings, BoundsThemselvesAreAccepted) {
   PlannerSettings s;
   s.vis_sample_s = PlannerSettings::kMinVisSampleS;
   s.plan_period_s = PlannerSettings::kMaxPeriodS;
+  s.safety_period_s = PlannerSettings::kMinPeriodS;
   s.reference_speed_ratio = 1.0;
   std::string why;
   EXPECT_TRUE(s.validate(&why)) << why;

@@ -84,9 +84,11 @@ void fuzzMapping(FuzzInput& in) {
     TOPO_PLANNER_FUZZ_CHECK(!why.empty());
     return;
   }
+  // MappingServer::buildMaps: the slice height inside the window (in metres), then its voxel row.
   const GridGeometry& g = shared->geometry();
+  if (!(c.esdf_slice_height_m >= g.windowMin().z() && c.esdf_slice_height_m < g.windowMax().z())) return;
   const int slice_z = g.indexOf(Eigen::Vector3d(0, 0, c.esdf_slice_height_m)).z();
-  (void)slice_z;
+  TOPO_PLANNER_FUZZ_CHECK(slice_z >= g.windowBox().min.z() - 1 && slice_z <= g.windowBox().max.z() + 1);
   if (g.windowBox().volume() <= 200000) esdf->updateAll();
 }
 

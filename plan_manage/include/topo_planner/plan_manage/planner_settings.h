@@ -26,7 +26,9 @@ struct PlannerSettings {
   /// Smallest vis_sample_s: the markers sample a trajectory at T / vis_sample_s points (capped), a
   /// tiny step only overflows that count.
   static constexpr double kMinVisSampleS = 0.001;
-  /// Largest timer period: ros::Duration holds 32-bit seconds; a period of a minute is no planner.
+  /// Timer periods: ros::Duration rounds below 1 ns to 0 (a timer that never waits; 1 ms is
+  /// already 50 times the default rate), and holds 32-bit seconds (a period of a minute is no planner).
+  static constexpr double kMinPeriodS = 0.001;
   static constexpr double kMaxPeriodS = 60.0;
 
   /// False with the reasons in *why (all of them, "; "-separated) when a field is out of range.

@@ -38,6 +38,12 @@ bool fromMsg(const Bspline& msg, ReceivedTrajectory* out, std::string* why);
 
 /// Most waypoints a nav_msgs/Path goal may hold.
 constexpr size_t kMaxWaypoints = 1000;
+/// A received B-spline's knot span [s] and coordinates [m] lie within these bounds (fromMsg):
+/// beyond them its derivatives (differences of control points over powers of the knot span)
+/// overflow; the planner sends knot spans of tenths of a second and points within its map.
+constexpr double kMinKnotSpanS = 1e-3;
+constexpr double kMaxKnotSpanS = 10.0;
+constexpr double kMaxCoordinateM = 1e5;
 
 /// The goal of a 2-D navigation goal (rviz): its x, y at `goal_height_m`. False (with a reason) when
 /// its header names a frame other than `frame_id` (an empty frame_id in the message is taken as
