@@ -96,7 +96,7 @@ fi
 if [ "${status[record]}" = pass ]; then
   port=$(free_port)
   export ROS_MASTER_URI=http://127.0.0.1:$port
-  roslaunch -p "$port" topo_planner planner.launch use_sim_time:=true pose_type:=pose output:=log \
+  roslaunch -p "$port" topo_planner planner.launch use_sim_time:=true pose_type:=pose output:=log clear_map_on_odom_jump:=false \
     $MAP_ARGS >>"$LOG" 2>&1 &
   launch=$!
   ok=false
