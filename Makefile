@@ -5,8 +5,9 @@ JOBS ?= 2
 WS := $(ROOT)/build/ws
 CATKIN_ARGS := -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=Release
 BIN = $(1)/devel/lib/topo_planner
+COMMA := ,
 
-.PHONY: deps build test bench bench-env bench-topo bench-opt bench-replan bench-forest-gen bench-camera bench-flight bench-flight-forests bench-faults soak demo map-demo test-asan test-tsan fuzz clean
+.PHONY: deps build test bench bench-env bench-topo bench-opt bench-replan bench-forest-gen bench-camera bench-flight bench-flight-forests bench-faults soak demo map-demo test-asan test-tsan test-sanitizers fuzz clean
 
 deps:
 	@bash scripts/install_deps.sh
@@ -99,23 +100,40 @@ soak: build
 	@mkdir -p results/soak
 	cd $(WS) && . devel/setup.sh && /usr/bin/python3 $(ROOT)/scripts/soak.py --out $(ROOT)/results/soak $(SOAK_ARGS)
 
-# The tests under AddressSanitizer + UBSan, and under ThreadSanitizer, in their own workspaces.
-# Any sanitizer report stops the test that hit it, so it counts as a failure.
+# The tests under AddressSanitizer + UBSan, and under ThreadSanitizer, in their own workspaces
+# (RelWithDebInfo). Every instrumented process, the tests and the nodes rostest launches, writes its
+# sanitizer reports to WS/sanitizer_logs (log_path, one file per process); each report counts as a
+# failure in the summary line, beside the JUnit results. The rostests run in simulated time with the
+# lockstep, so the slowdown changes only the wall time: TOPO_PLANNER_TIME_LIMIT_SCALE stretches their
+# wall-clock hang guards (rostest time-limit, the tests' wall_timeout_s). test-sanitizers runs both and
+# ends with one line over the two.
+ASAN_SCALE ?= 4
+TSAN_SCALE ?= 12
+define sanitized_tests
+	$(call make_ws,$(ROOT)/build/$(1))
+	@rm -rf build/$(1)/build/test_results build/$(1)/sanitizer_logs && mkdir -p build/$(1)/sanitizer_logs
+	cd build/$(1) && catkin_make -j$(JOBS) -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	  -DTOPO_PLANNER_SANITIZE=$(2) tests
+	cd build/$(1) && $(3) catkin_make -j$(JOBS) -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	  -DTOPO_PLANNER_SANITIZE=$(2) run_tests
+	@/usr/bin/python3 scripts/test_summary.py $(ROOT)/build/$(1)/build/test_results --sanitizer-logs $(ROOT)/build/$(1)/sanitizer_logs
+endef
+SAN_LOG = log_path=$(ROOT)/build/$(1)/sanitizer_logs/$(2):log_exe_name=1
 test-asan: deps
-	$(call make_ws,$(ROOT)/build/ws_asan)
-	@rm -rf build/ws_asan/build/test_results
-	cd build/ws_asan && UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 ASAN_OPTIONS=detect_leaks=1 \
-	  catkin_make -j$(JOBS) -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-	  -DTOPO_PLANNER_SANITIZE=address,undefined run_tests
-	@/usr/bin/python3 scripts/test_summary.py $(ROOT)/build/ws_asan/build/test_results
+	$(call sanitized_tests,ws_asan,address$(COMMA)undefined,TOPO_PLANNER_TIME_LIMIT_SCALE=$(ASAN_SCALE) \
+	  ASAN_OPTIONS=detect_leaks=1:$(call SAN_LOG,ws_asan,asan) LSAN_OPTIONS=suppressions=$(ROOT)/scripts/lsan.supp \
+	  UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1:$(call SAN_LOG,ws_asan,ubsan))
 
 test-tsan: deps
-	$(call make_ws,$(ROOT)/build/ws_tsan)
-	@rm -rf build/ws_tsan/build/test_results
-	cd build/ws_tsan && TSAN_OPTIONS="halt_on_error=1 suppressions=$(ROOT)/scripts/tsan.supp" \
-	  catkin_make -j$(JOBS) -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-	  -DTOPO_PLANNER_SANITIZE=thread run_tests
-	@/usr/bin/python3 scripts/test_summary.py $(ROOT)/build/ws_tsan/build/test_results
+	$(call sanitized_tests,ws_tsan,thread,TOPO_PLANNER_TIME_LIMIT_SCALE=$(TSAN_SCALE) \
+	  TSAN_OPTIONS="halt_on_error=1 suppressions=$(ROOT)/scripts/tsan.supp $(subst :, ,$(call SAN_LOG,ws_tsan,tsan))")
+
+test-sanitizers: deps
+	-$(MAKE) --no-print-directory test-asan
+	-$(MAKE) --no-print-directory test-tsan
+	@echo "test-sanitizers: ASan + UBSan and TSan together:"
+	@/usr/bin/python3 scripts/test_summary.py build/ws_asan/build/test_results build/ws_tsan/build/test_results \
+	  --sanitizer-logs build/ws_asan/sanitizer_logs --sanitizer-logs build/ws_tsan/sanitizer_logs
 
 # libFuzzer harnesses of test/fuzz (clang-14, ASan + UBSan, build/ws_fuzz): each for FUZZ_S seconds on
 # a copy of its corpus; a table (execs/s, coverage, corpus, crashes) and a RESULT line; non-zero exit

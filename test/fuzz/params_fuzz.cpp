@@ -159,6 +159,7 @@ void fuzzPlanner(FuzzInput& in) {
   p.optimizer.max_vel_mps = in.number(p.optimizer.max_vel_mps);
   p.optimizer.max_acc_mps2 = in.number(p.optimizer.max_acc_mps2);
   p.astar.clearance_m = in.number(p.astar.clearance_m);
+  f.rest_retry_interval_s = in.number(f.rest_retry_interval_s);  // read last: the corpus keeps its layout
 
   std::string why;
   if (!f.validate(&why)) {

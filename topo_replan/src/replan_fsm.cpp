@@ -196,6 +196,8 @@ bool ReplanFsm::Config::validate(std::string* why) const {
   if (max_plan_failures < 1) return bad("max_plan_failures must be >= 1");
   if (!route.validate(&sub)) return bad(sub);
   if (reroute_after_failures < 1) return bad("reroute_after_failures must be >= 1");
+  if (!(rest_retry_interval_s >= 0.0 && rest_retry_interval_s <= 10.0))
+    return bad("rest_retry_interval_s must be in [0, 10] s");
   if (!(backoff_length_m >= 0.0) || !(max_backoff_length_m >= backoff_length_m) || !(max_backoff_length_m <= 20.0))
     return bad("backoff lengths must satisfy 0 <= backoff_length_m <= max_backoff_length_m <= 20");
   if (max_backoffs < 0) return bad("max_backoffs must be >= 0");
@@ -1063,6 +1065,7 @@ void ReplanFsm::startManoeuvreLocked(ExecTrajectory manoeuvre, bool backoff, Fsm
   manoeuvre.id = next_id_++;
   replaceCurrentLocked(manoeuvre);
   consecutive_failures_ = 0;  // a new start: the tries after it are counted anew
+  failures_at_stall_ = 0;
   failures_at_reroute_ = 0;
   route_stale_ = true;        // searched again from where it ends
   ++route_epoch_;
@@ -1120,8 +1123,14 @@ bool ReplanFsm::handleStallLocked(double t, const EsdfMap& map, FsmOutput* out) 
     return true;
   }
   const bool manoeuvring = current_ && current_->manoeuvre() && t < current_->endTime();
-  if (since < (stalls_ + 1) * config_.progress_timeout_s || manoeuvring || goals_pending_ || backoff_when_stopped_)
+  const bool forced = std::exchange(force_stall_, false);
+  if ((since < (stalls_ + 1) * config_.progress_timeout_s && !forced) || manoeuvring || goals_pending_ ||
+      backoff_when_stopped_)
     return false;
+  if (forced) {
+    std::snprintf(text, sizeof(text), "%d plans failed at rest, no back-off left (%.1f m left)",
+                  config_.max_plan_failures, progress_.remaining());
+  }
   // A stall: the next remedy. Every one marks the place for the route searches to avoid.
   ++stalls_;
   // The zone lies ahead along the way, where the vehicle was heading (one around the vehicle alone
@@ -1173,6 +1182,7 @@ void ReplanFsm::giveUpLocked(double t, const EsdfMap& map, GoalStatus status, Re
   route_.clear();
   route_goals_.clear();
   consecutive_failures_ = 0;
+  failures_at_stall_ = 0;
   progress_.clear();
   backoff_when_stopped_ = false;
   const bool moving = current_ && !current_->braking && t < current_->endTime();
@@ -1341,6 +1351,7 @@ bool ReplanFsm::startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out) {
     progress.min_gain_m = config_.progress_min_gain_m;
     progress_ = MissionProgress(progress);
     stalls_ = 0;
+    force_stall_ = false;
     stall_zones_.clear();
     backoff_when_stopped_ = false;
   }
@@ -1459,6 +1470,8 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
     replaceCurrentLocked(traj);
     collision_ahead_ = false;
     consecutive_failures_ = 0;
+    failures_at_stall_ = 0;
+    force_stall_ = false;
     rerouted_since_success_ = false;
     failures_at_reroute_ = 0;
     if (!look_hold) last_progress_s_ = t;
@@ -1510,6 +1523,14 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
       escape_report += (escape_report.empty() ? "" : "; ") + report;
     }
     if (!escape && !escape_report.empty()) event.message += "; " + escape_report;
+    // Still failing at rest with no back-off left: the stall remedy (a zone ahead, a re-route) now,
+    // not when the progress clock runs out.
+    if (!escape && config_.global_route && !superseded && generating && at_rest && !giving_up &&
+        consecutive_failures_ - failures_at_stall_ >= config_.max_plan_failures) {
+      force_stall_ = true;
+      failures_at_stall_ = consecutive_failures_;
+    }
+    if (event.fallback == "hover_retry") rest_retry_after_s_ = finished + config_.rest_retry_interval_s;
     // The way looks blocked (no guide path, no free local goal) or plans keep failing: re-route.
     const bool blocked = result.status == ReplanStatus::kNoPath || result.status == ReplanStatus::kGoalInCollision;
     if (config_.global_route && !superseded && !giving_up && !escape &&
@@ -1607,6 +1628,7 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
     case FsmState::kGenNewTraj: {
       // A retry rebuilds the reference from where the vehicle will be, so it starts from its state.
       const bool fresh = goals_pending_;
+      if (!fresh && consecutive_failures_ > 0 && t < rest_retry_after_s_) break;  // paced retries at rest
       if (!fresh) pending_goals_ = remainingGoalsLocked();
       goals_pending_ = true;
       if (startGoalsLocked(t, map, &out))
@@ -1670,6 +1692,7 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
         // A new reference from rest is a new strategy: it gets its own max_plan_failures tries (the
         // failures of the replans that led here do not count against it).
         consecutive_failures_ = 0;
+        failures_at_stall_ = 0;
         failures_at_reroute_ = 0;
         plan(t, map, FsmEvent::Trigger::kRetry, &lock, &out, now);
       } else {

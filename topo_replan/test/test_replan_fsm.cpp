@@ -35,6 +35,7 @@ ReplanFsm::Config testConfig() {
   c.reference.cruise_timing = true;
   c.replanner.local_goal_margin_m = 2.0;  // the planner node's
   c.depth_timeout_s = 0.0;  // these maps are given, not fused (the liveness tests turn it on)
+  c.rest_retry_interval_s = 0.25;  // the planner node's
   return c;
 }
 
@@ -85,6 +86,7 @@ struct Faults {
 
 struct FlightLog {
   std::vector<FsmEvent> events;
+  std::vector<double> event_times;  // the tick of each event [s]
   std::vector<ExecTrajectory> trajectories;
   std::vector<const EsdfMap*> trajectory_maps;  // the map each trajectory was published on
   double max_position_step = 0.0;  // largest step of the commanded position between ticks beyond |v| dt [m]
@@ -128,7 +130,7 @@ FlightLog fly(ReplanFsm* fsm, const Eigen::Vector3d& start, const std::vector<Ei
     log.duration_s = t_true;
     const EsdfMap& map = mapAt(t, vehicle.position);
     for (FsmOutput out : {fsm->checkSafety(t, map), fsm->tick(t, map)}) {
-      if (out.event) log.events.push_back(*out.event);
+      if (out.event) log.events.push_back(*out.event), log.event_times.push_back(t);
       if (getenv("FSM_DEBUG") && (out.event || !out.message.empty()))
         printf("x=%.2f v=%.2f t=%.2f %s | %s %s %s %s jump=%.3f\n", vehicle.position.x(), vehicle.velocity.norm(), t, out.message.c_str(), out.event ? toString(out.event->trigger) : "",
                out.event ? toString(out.event->status) : "", out.event ? out.event->fallback.c_str() : "",
@@ -350,8 +352,14 @@ TEST(ReplanFsm, StopsBeforeAWallWithNoWayAround) {
     for (size_t i = 0; i < log.events.size(); ++i)
       if (log.events[i].trigger == FsmEvent::Trigger::kEmergency) last_brake = i;
     int tries = 0;
-    for (size_t i = last_brake + 1; i < log.events.size(); ++i)
-      tries += log.events[i].fallback == "hover_retry" || log.events[i].fallback == "give_up";
+    double last_try = -INFINITY;
+    for (size_t i = last_brake + 1; i < log.events.size(); ++i) {
+      if (log.events[i].fallback != "hover_retry" && log.events[i].fallback != "give_up") continue;
+      ++tries;
+      // At rest the tries are paced (rest_retry_interval_s), not one per tick.
+      EXPECT_GE(log.event_times[i] - last_try, config.rest_retry_interval_s - 1e-9) << "try " << tries;
+      last_try = log.event_times[i];
+    }
     EXPECT_EQ(tries, config.max_plan_failures);
   }
 }
@@ -442,6 +450,17 @@ TEST(ReplanFsm, BacksOffOutOfADeadEndAndReroutes) {
       EXPECT_EQ(backoffs, 0);
       EXPECT_EQ(give_ups, 1);
       EXPECT_EQ(fsm->lastGoalStatus(), GoalStatus::kGivenUp);
+      // With no back-off left, max_plan_failures failures at rest call the stall remedy (a zone ahead,
+      // a re-route) at once, not when the progress clock runs out (it would not within the 12 s).
+      double first_failure = NAN, first_remedy = NAN;
+      for (size_t i = 0; i < log.events.size(); ++i) {
+        if (std::isnan(first_failure) && log.events[i].fallback == "hover_retry") first_failure = log.event_times[i];
+        if (std::isnan(first_remedy) && log.events[i].fallback == "reroute" &&
+            log.events[i].message.find("plans failed at rest") != std::string::npos)
+          first_remedy = log.event_times[i];
+      }
+      ASSERT_FALSE(std::isnan(first_remedy)) << "no stall remedy after the failures at rest";
+      EXPECT_LT(first_remedy - first_failure, 0.5 * config.progress_timeout_s);
       continue;
     }
     EXPECT_TRUE(log.goal_reached);
@@ -760,7 +779,7 @@ TEST(ReplanFsm, EscapesFromInsideTheClearanceThenFliesTheMission) {
   EXPECT_NE(last.message.find("time limit of 3 s"), std::string::npos) << last.message;
   int tries = 0;
   for (const FsmEvent& e : stuck_log.events) tries += e.fallback == "hover_retry";
-  EXPECT_GE(tries, int(2.9 / 0.05));  // it kept trying until then (every tick)
+  EXPECT_GE(tries, int(2.9 / config.rest_retry_interval_s) - 1);  // it kept trying until then (paced)
 }
 
 // The way out of an obstacle's clearance crosses unknown space: the FSM holds and looks there

@@ -48,7 +48,9 @@
 // strategy: re-route (above), and after max_plan_failures failed plans, or when it cannot start
 // and no escape up the distance field exists, or when its plans have been cut to a hold at the same
 // place max_look_holds times (the way on lies in unknown space the camera does not see by turning),
-// back off along the flown path (at most max_backoffs times per mission) and re-route from there.
+// back off along the flown path (at most max_backoffs times per mission) and re-route from there;
+// with no back-off left, max_plan_failures failures at rest call the stall remedy below at once.
+// At rest, failed plans are retried every rest_retry_interval_s, not at every tick.
 // Stalls with every plan succeeding (hovering at the edge of the known space, creeping, shuttling)
 // are caught by progress, not by failures: the distance left along the mission's way
 // (MissionProgress) must shrink by progress_min_gain_m within progress_timeout_s; each time it does
@@ -236,7 +238,14 @@ class ReplanFsm {
     double goal_clearance_m = 0.3;    ///< goals closer to a known obstacle are refused [m]
     double goal_tolerance_m = 0.3;    ///< the mission ends when the trajectory has ended and the vehicle is this close [m]
     double stopped_speed_mps = 0.2;   ///< below this the vehicle counts as stopped after braking [m/s]
-    int max_plan_failures = 30;       ///< consecutive failed plans in GEN_NEW_TRAJ before giving up the mission
+    /// Consecutive failed plans in GEN_NEW_TRAJ: without global_route the mission is then given up;
+    /// with it, at rest, the FSM changes strategy (a back-off while back-offs are left, else the stall
+    /// remedy at once: a zone ahead and a re-route), every this many failures.
+    int max_plan_failures = 30;
+    /// At rest, a failed plan is tried again this long after it ended (each try draws another
+    /// roadmap; the map and the start do not change faster) rather than at every tick; 0: every
+    /// tick [s].
+    double rest_retry_interval_s = 0.0;
     /// A vehicle at rest that the replanner refuses as kStartInCollision first moves up the distance
     /// field (plan_env ascendDistance) until it is this far from obstacles (interpolated ESDF) [m].
     double escape_clearance_m = 0.45;
@@ -493,6 +502,9 @@ class ReplanFsm {
   double mission_limit_s_ = INFINITY;
   MissionProgress progress_;              // the distance left along the mission's way
   int stalls_ = 0;                        // stall remedies since the last gain of progress
+  bool force_stall_ = false;              // failures at rest asked for the stall remedy now
+  int failures_at_stall_ = 0;             // consecutive_failures_ when the failures last forced it
+  double rest_retry_after_s_ = -INFINITY; // a failed plan at rest is tried again from then
   double stall_gain_s_ = 0.0;             // progress_.lastGain() when stalls_ was last reset
   bool backoff_when_stopped_ = false;     // a stall remedy: back off once the stop it began has ended
   double progress_tick_s_ = NAN;          // the last tick that measured progress (or paused it) [s]
