@@ -33,6 +33,8 @@
 #include <topo_planner/PlannerHeartbeat.h>
 #include <topo_planner/PositionCommand.h>
 
+#include "../../test/wall_scale.h"
+
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -413,7 +415,7 @@ TEST(HostileTraffic, TheFlightGoesOnAndTheMapIsUnchanged) {
   // The map: no phantom obstacle where the refused images and clouds would have put one.
   ros::Subscriber occ_sub = nh.subscribe<sensor_msgs::PointCloud2>(
       "/planner/mapping/occupancy", 1, [&](const sensor_msgs::PointCloud2ConstPtr& m) { occupancy = m; });
-  const ros::WallTime map_deadline = ros::WallTime::now() + ros::WallDuration(30.0);
+  const ros::WallTime map_deadline = ros::WallTime::now() + ros::WallDuration(30.0 * topo_planner_test::wallScale());
   while (ros::ok() && ros::WallTime::now() < map_deadline && (!occupancy || !truth || refused < 0)) {
     ros::spinOnce();
     ros::WallDuration(0.1).sleep();

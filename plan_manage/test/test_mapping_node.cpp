@@ -27,6 +27,8 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include "../../test/wall_scale.h"
+
 #include <cmath>
 #include <cstring>
 #include <functional>
@@ -158,7 +160,7 @@ bool wallComplete(const CloudWatcher& w, int face_x_index = kFaceXIndex) {
 
 // Spins until done() or the iteration budget runs out; step() is called once per iteration.
 bool spinUntil(const std::function<bool()>& done, const std::function<void(int)>& step = nullptr) {
-  for (int i = 0; i < kMaxIterations; ++i) {
+  for (int i = 0; i < kMaxIterations * topo_planner_test::wallScale(); ++i) {
     if (step) step(i);
     kStep.sleep();
     ros::spinOnce();

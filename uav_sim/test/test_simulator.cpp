@@ -24,6 +24,8 @@
 #include <topo_planner/PositionCommand.h>
 #include <topo_planner/RotorCommand.h>
 
+#include "../../test/wall_scale.h"
+
 #include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
@@ -72,7 +74,7 @@ nav_msgs::Odometry latestOdom() {
 
 // Polls pred every 10 ms of wall time (callbacks run on the AsyncSpinner) for at most limit_s.
 bool waitFor(const std::function<bool()>& pred, double limit_s) {
-  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(limit_s);
+  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(limit_s * topo_planner_test::wallScale());
   while (ros::ok() && ros::WallTime::now() < end) {
     if (pred()) return true;
     ros::WallDuration(0.01).sleep();
