@@ -298,6 +298,7 @@ void MappingServer::subscribeAndAdvertise() {
   occupancy_pub_ = nh_.advertise<sensor_msgs::PointCloud2>("occupancy", 1);
   inflated_pub_ = nh_.advertise<sensor_msgs::PointCloud2>("occupancy_inflated", 1);
   esdf_slice_pub_ = nh_.advertise<sensor_msgs::PointCloud2>("esdf_slice", 1);
+  fused_pub_ = nh_.advertise<std_msgs::Header>("depth_fused", 10);
   if (config_.occupancy_publish_rate_hz > 0.0)
     occupancy_timer_ = nh_.createTimer(ros::Duration(1.0 / config_.occupancy_publish_rate_hz),
                                        &MappingServer::publishOccupancy, this);
@@ -577,9 +578,15 @@ void MappingServer::integrate(const char* source, const ros::Time& stamp, const 
   esdf_->update(changed);
   const double esdf_ms = msSince(t1);
   // A frame that reached the map proves the sensor alive, also when it held no valid return.
-  if (result.status == MapStatus::kSuccess || result.status == MapStatus::kNoValidData) {
+  const bool reached = result.status == MapStatus::kSuccess || result.status == MapStatus::kNoValidData;
+  if (reached) {
     stats_.depth_stamp_s = stamp.toSec();
     stats_.depth_arrival_s = ros::Time::now().toSec();
+    // Announced once fused (the simulator's perception lockstep waits for it).
+    std_msgs::Header fused;
+    fused.stamp = stamp;
+    fused.frame_id = config_.frame_id;
+    fused_pub_.publish(fused);
   }
   if (result.status != MapStatus::kSuccess) {
     ++frames_refused_;

@@ -20,6 +20,7 @@
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
+#include <std_msgs/Header.h>
 #include <topo_planner/Collision.h>
 #include <topo_planner/PositionCommand.h>
 #include <topo_planner/RotorCommand.h>
@@ -350,6 +351,39 @@ TEST_F(Simulator, FlyingIntoAnObstacleIsACollision) {
     EXPECT_EQ(obs.collisions[1].count, 2u);
   }
   stream(here);
+}
+
+// The perception lockstep (simulator.test: perception_topic /test/depth_fused; this node plays the
+// mapping). After a frame fused at t0 the clock runs on to t0 + perception_max_lag_s (0.2 s) and
+// waits there for the next one; a frame fused then releases it; with none for perception_timeout_s
+// of wall time it runs on (a dead planner does not stop the clock). Last: the others run unheld.
+TEST_F(Simulator, TheClockWaitsForTheMappingToFuseDepth) {
+  if (!ros::Time::isSimTime()) GTEST_SKIP() << "the perception lockstep runs in sim time only";
+  ros::Publisher fused = nh_->advertise<std_msgs::Header>("/test/depth_fused", 10);
+  ASSERT_TRUE(waitFor([&] { return fused.getNumSubscribers() > 0; }, 10.0)) << "the simulator does not listen";
+  std_msgs::Header frame;
+  frame.stamp = ros::Time::now();
+  fused.publish(frame);
+  const double t0 = frame.stamp.toSec(), lag = 0.2;
+  // Held: the clock stops within the lag (and one odometry batch, 5 ms) of the frame.
+  double held = NAN;
+  ASSERT_TRUE(waitFor(
+      [&] {
+        const double a = ros::Time::now().toSec();
+        ros::WallDuration(0.3).sleep();
+        held = ros::Time::now().toSec();
+        return held == a && held > t0;
+      },
+      10.0))
+      << "the clock never stopped";
+  EXPECT_GE(held, t0 + lag - 1e-6);
+  EXPECT_LE(held, t0 + lag + 0.006);
+  // A frame fused at the held time releases it.
+  frame.stamp = ros::Time::now();
+  fused.publish(frame);
+  ASSERT_TRUE(waitFor([&] { return ros::Time::now().toSec() > held + 0.1; }, 10.0)) << "not released";
+  // No frame any more: held again, then on after the timeout (2 s of wall time).
+  ASSERT_TRUE(waitFor([&] { return ros::Time::now().toSec() > held + 1.0; }, 30.0)) << "held for good";
 }
 
 }  // namespace

@@ -69,6 +69,10 @@ bool QuadrotorSim::Config::validate(std::string* why) const {
   if (!(finiteNonNegative(max_lag_s) && max_lag_s <= 10.0)) err << "max_lag_s must be in [0, 10]; ";
   if (!(finitePositive(lockstep_timeout_s) && lockstep_timeout_s <= 10.0))
     err << "lockstep_timeout_s must be in (0, 10]; ";
+  if (!(finitePositive(perception_max_lag_s) && perception_max_lag_s <= 10.0))
+    err << "perception_max_lag_s must be in (0, 10]; ";
+  if (!(finitePositive(perception_timeout_s) && perception_timeout_s <= 60.0))
+    err << "perception_timeout_s must be in (0, 60]; ";
   if (!(finitePositive(command_timeout_s) && command_timeout_s <= 3600.0))
     err << "command_timeout_s must be in (0, 3600]; ";
   if (!(finitePositive(collision_radius_m) && collision_radius_m <= 10.0))
@@ -112,6 +116,19 @@ bool readQuadrotorSimParams(const ros::NodeHandle& pnh, QuadrotorSim::Config* co
   r.read("max_lag_s", c.max_lag_s);
   r.read("lockstep", c.lockstep);
   r.read("lockstep_timeout_s", c.lockstep_timeout_s);
+  r.read("perception_topic", c.perception_topic);
+  r.read("perception_max_lag_s", c.perception_max_lag_s);
+  r.read("perception_timeout_s", c.perception_timeout_s);
+  // The wall-clock waits of both locksteps stretch by this (make test-asan / test-tsan: every node
+  // runs several times slower; the simulated flight is the same).
+  double wall_timeout_scale = 1.0;
+  r.read("wall_timeout_scale", wall_timeout_scale);
+  if (!(wall_timeout_scale >= 1.0 && wall_timeout_scale <= 100.0)) {
+    r.errors() << "wall_timeout_scale must be in [1, 100]; ";
+  } else {
+    c.lockstep_timeout_s *= wall_timeout_scale;
+    c.perception_timeout_s *= wall_timeout_scale;
+  }
   r.read("command_timeout_s", c.command_timeout_s);
   std::string failsafe = c.failsafe == QuadrotorSim::Failsafe::kHold ? "hold" : "cut";
   r.read("failsafe", failsafe);
@@ -202,6 +219,10 @@ std::unique_ptr<QuadrotorSim> QuadrotorSim::create(const ros::NodeHandle& nh, co
   command_nh.setCallbackQueue(&s.command_queue_);
   s.command_sub_ = command_nh.subscribe("controller/rotor_command", 10, &QuadrotorSim::commandCallback, &s,
                                         ros::TransportHints().tcpNoDelay());
+  // The mapping's frames fused, on the same queue (the loop may be waiting for them: perception lockstep).
+  if (config.publish_clock && config.lockstep && !config.perception_topic.empty())
+    s.fused_sub_ = command_nh.subscribe(config.perception_topic, 10, &QuadrotorSim::fusedCallback, &s,
+                                        ros::TransportHints().tcpNoDelay());
   s.command_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &s.command_queue_);
   s.command_spinner_->start();
   ROS_INFO("quadrotor_sim: start (%.2f %.2f %.2f) hovering, %.0f Hz odometry, %s, collision radius %.2f m",
@@ -222,6 +243,7 @@ std::unique_ptr<QuadrotorSim> QuadrotorSim::create(const ros::NodeHandle& nh, co
 QuadrotorSim::~QuadrotorSim() {
   stop_ = true;
   command_cv_.notify_all();
+  perception_cv_.notify_all();
   if (thread_.joinable()) thread_.join();
   if (command_spinner_) command_spinner_->stop();
 }
@@ -344,6 +366,7 @@ void QuadrotorSim::loop() {
     }
     const ros::Time published = publishOdometry();
     if (config_.publish_clock && config_.lockstep && !published.isZero()) waitForReply(published);
+    if (fused_sub_) waitForPerception(stampOf(step_));
 
     const auto wall = SteadyClock::now();
     const double period = std::chrono::duration<double>(wall - status_wall).count();
@@ -457,6 +480,7 @@ void QuadrotorSim::applyFaults(double t0_s, double t1_s) {
       case FaultSchedule::Kind::kDepthBlackout: {
         std_msgs::Bool msg;
         msg.data = config_.faults.depthBlackout(t1_s);
+        depth_blackout_ = msg.data;
         depth_blackout_pub_.publish(msg);
         break;
       }
@@ -571,6 +595,43 @@ void QuadrotorSim::waitForReply(const ros::Time& odom_stamp) {
                     odom_stamp.toSec(), 1e3 * config_.lockstep_timeout_s);
 }
 
+void QuadrotorSim::fusedCallback(const std_msgs::HeaderConstPtr& msg) {
+  if (msg->stamp.isZero()) return;
+  {
+    std::lock_guard<std::mutex> lock(perception_mutex_);
+    // The latest, not the largest: after a backward clock step the frames are stamped earlier.
+    fused_stamp_ = msg->stamp;
+    perception_suspended_ = false;
+  }
+  perception_cv_.notify_all();
+}
+
+void QuadrotorSim::waitForPerception(const ros::Time& clock) {
+  std::unique_lock<std::mutex> lock(perception_mutex_);
+  // Not before the first frame, nor while the camera is blacked out (no frame will come).
+  if (fused_stamp_.isZero() || perception_suspended_ || depth_blackout_) return;
+  const ros::Time due = clock - ros::Duration(config_.perception_max_lag_s);
+  if (fused_stamp_ >= due) return;
+  {
+    std::lock_guard<std::mutex> stats_lock(stats_mutex_);
+    ++stats_.perception_waits;
+  }
+  const bool fused = perception_cv_.wait_for(lock, std::chrono::duration<double>(config_.perception_timeout_s),
+                                             [&] { return stop_ || fused_stamp_ >= due; });
+  if (fused) return;
+  perception_suspended_ = true;  // until the next frame fused
+  const double last = fused_stamp_.toSec();
+  lock.unlock();
+  {
+    std::lock_guard<std::mutex> stats_lock(stats_mutex_);
+    ++stats_.perception_timeouts;
+  }
+  ROS_WARN_THROTTLE(5.0,
+                    "quadrotor_sim: no depth frame fused after %.3f within %.1f s (wall; the last one %.3f): running "
+                    "on without waiting until the next one",
+                    due.toSec(), config_.perception_timeout_s, last);
+}
+
 void QuadrotorSim::logStatus(double wall_s, uint64_t steps_in_period) {
   const Stats s = stats();
   const Quadrotor::State& q = quad_.state();
@@ -578,11 +639,12 @@ void QuadrotorSim::logStatus(double wall_s, uint64_t steps_in_period) {
   ROS_INFO(
       "quadrotor_sim: t %.1f s, real-time factor %.2f (asked %.2f), at (%.2f %.2f %.2f) %.2f m/s, "
       "%u collisions, %lu commands (%lu refused), %lu lockstep timeouts, %lu failsafes, %lu backlogs dropped, "
-      "%lu fault changes, %lu odometry messages dropped",
+      "%lu fault changes, %lu odometry messages dropped, %lu waits for the mapping (%lu in vain)",
       stampOf(step_).toSec(), factor, config_.publish_clock ? config_.realtime_factor : 1.0, q.position.x(),
       q.position.y(), q.position.z(), q.velocity.norm(), s.collisions, (unsigned long)s.commands,
       (unsigned long)s.bad_commands, (unsigned long)s.lockstep_timeouts, (unsigned long)s.failsafe_events,
-      (unsigned long)s.lag_events, (unsigned long)s.fault_events, (unsigned long)s.odom_dropped);
+      (unsigned long)s.lag_events, (unsigned long)s.fault_events, (unsigned long)s.odom_dropped,
+      (unsigned long)s.perception_waits, (unsigned long)s.perception_timeouts);
   if (config_.publish_clock && factor < 0.8 * config_.realtime_factor)
     ROS_WARN(
         "quadrotor_sim: the simulation runs at %.2f x real time, below the %.2f asked (loaded machine or a slow "

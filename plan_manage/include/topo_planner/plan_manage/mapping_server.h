@@ -23,6 +23,8 @@
 //     ~occupancy           centres of the occupied voxels
 //     ~occupancy_inflated  centres of the voxels within esdf/inflate_radius_m of an obstacle
 //     ~esdf_slice          the ESDF at height publish/esdf_slice_height_m, field `intensity` = distance [m]
+//   Published at once, for every frame (image or cloud) that reached the map
+//     ~depth_fused         std_msgs/Header, the frame's stamp (the simulator's perception lockstep)
 //
 // Parameters (private; the default is the default of the config struct below / of plan_env)
 //   frame_id                    "world"   world frame of the map, the poses and the clouds
@@ -85,6 +87,7 @@
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/PointCloud2.h>
+#include <std_msgs/Header.h>
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_listener.h>
 
@@ -250,6 +253,7 @@ class MappingServer {
   std::unique_ptr<tf2_ros::Buffer> tf_buffer_;            // with body_frame_id only
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
   ros::Publisher occupancy_pub_, inflated_pub_, esdf_slice_pub_;
+  ros::Publisher fused_pub_;  // ~depth_fused: the stamp of every frame that reached the map
   ros::Timer occupancy_timer_, esdf_timer_;
 };
 

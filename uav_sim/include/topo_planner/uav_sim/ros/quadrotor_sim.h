@@ -41,6 +41,15 @@
 // the run does not depend on scheduling. A timeout suspends the lockstep until the next command
 // arrives (so a dead controller does not slow the clock to a crawl).
 //
+// Perception lockstep (sim time with lockstep, `perception_topic` set: simulation.launch sets the
+// planner's ~mapping/depth_fused). The mapping announces every depth frame that reached its map
+// (std_msgs/Header, the frame's stamp). Before the clock moves on past the last frame fused by more
+// than perception_max_lag_s of simulated time, the simulator waits for the next one (at most
+// perception_timeout_s of wall time), so the camera, the mapping and the planner's depth freshness
+// keep up with the clock at any load (sanitizers, a loaded machine). Not before the first frame, nor
+// while a depth blackout fault runs; a timeout suspends it until the next frame arrives (a dead
+// planner or camera does not slow the clock to a crawl).
+//
 // Commands. Before the first command the rotors hold hover speed (the vehicle hangs still at the
 // start). A command is held (zero-order hold) until the next one; when none arrives for
 // command_timeout_s of simulated time, the failsafe takes over: `hold` (default) emulates a flight
@@ -91,6 +100,7 @@
 #include <nav_msgs/Odometry.h>
 #include <ros/callback_queue.h>
 #include <ros/ros.h>
+#include <std_msgs/Header.h>
 #include <tf2_ros/static_transform_broadcaster.h>
 #include <tf2_ros/transform_broadcaster.h>
 #include <topo_planner/RotorCommand.h>
@@ -130,6 +140,9 @@ class QuadrotorSim {
     double max_lag_s = 0.05;              ///< wall time the loop may catch up after falling behind [s]
     bool lockstep = true;                 ///< with publish_clock: wait for the controller's answer to each odometry
     double lockstep_timeout_s = 0.05;     ///< longest wait for that answer (wall) [s]
+    std::string perception_topic;         ///< depth frames fused (std_msgs/Header); empty: no perception lockstep
+    double perception_max_lag_s = 0.2;    ///< the clock leads the last frame fused by at most this [s]
+    double perception_timeout_s = 2.0;    ///< longest wait for the next frame fused (wall) [s]
     double command_timeout_s = 0.1;       ///< simulated time without commands before the failsafe [s]
     Failsafe failsafe = Failsafe::kHold;  ///< what the vehicle does then
     double collision_radius_m = 0.15;     ///< body sphere radius [m]
@@ -163,6 +176,8 @@ class QuadrotorSim {
     uint64_t commands = 0;      ///< rotor commands accepted
     uint64_t bad_commands = 0;  ///< refused (NaN/inf/negative)
     uint64_t lockstep_timeouts = 0;
+    uint64_t perception_waits = 0;     ///< times the clock waited for the mapping
+    uint64_t perception_timeouts = 0;  ///< ... in vain
     uint64_t failsafe_events = 0;
     uint64_t lag_events = 0;  ///< backlogs dropped
     uint64_t fault_events = 0;      ///< fault changes applied (starts, ends, jumps, steps)
@@ -188,6 +203,8 @@ class QuadrotorSim {
   /// newest message published (zero if none).
   ros::Time publishOdometry();
   void waitForReply(const ros::Time& odom_stamp);
+  void fusedCallback(const std_msgs::HeaderConstPtr& msg);
+  void waitForPerception(const ros::Time& clock);
   void publishClock();
   /// Applies the faults whose changes fall in (t0_s, t1_s] of simulated time (loop thread).
   void applyFaults(double t0_s, double t1_s);
@@ -231,13 +248,20 @@ class QuadrotorSim {
   bool lockstep_suspended_ = false;
   std::atomic<uint64_t> current_step_{0};
 
+  // Perception lockstep state, written by the depth_fused callback (the command queue's thread).
+  std::mutex perception_mutex_;
+  std::condition_variable perception_cv_;
+  ros::Time fused_stamp_;            // stamp of the last depth frame fused (zero: none yet)
+  bool perception_suspended_ = false;
+  bool depth_blackout_ = false;      // inside a depth blackout fault (the loop's thread)
+
   mutable std::mutex stats_mutex_;
   Stats stats_;
 
   std::unique_ptr<TruthMapSubscriber> truth_;
   ros::CallbackQueue command_queue_;
   std::unique_ptr<ros::AsyncSpinner> command_spinner_;
-  ros::Subscriber command_sub_;
+  ros::Subscriber command_sub_, fused_sub_;
   ros::Publisher odom_pub_, truth_pub_, fc_odom_pub_, collision_pub_, clock_pub_;
   ros::Publisher depth_blackout_pub_, odom_offset_pub_, fault_event_pub_;
   tf2_ros::TransformBroadcaster tf_broadcaster_;
