@@ -113,6 +113,8 @@ define sanitized_tests
 	$(call make_ws,$(ROOT)/build/$(1))
 	@rm -rf build/$(1)/build/test_results build/$(1)/sanitizer_logs && mkdir -p build/$(1)/sanitizer_logs
 	cd build/$(1) && catkin_make -j$(JOBS) -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	  -DTOPO_PLANNER_SANITIZE=$(2)
+	cd build/$(1) && catkin_make -j$(JOBS) -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
 	  -DTOPO_PLANNER_SANITIZE=$(2) tests
 	cd build/$(1) && $(3) catkin_make -j$(JOBS) -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=RelWithDebInfo \
 	  -DTOPO_PLANNER_SANITIZE=$(2) run_tests

@@ -47,13 +47,18 @@ stop() {  # SIGINT a process (and its group's children) and wait for it
 }
 
 INPUTS="/odom /camera/depth/image_rect_raw /camera/depth/camera_info /camera/pose /tf /tf_static /move_base_simple/goal /planning/waypoints"
+# Under the sanitizers (make test-asan / test-tsan) every node runs several times slower: the hang
+# guards stretch and the bag plays that much slower (rosbag play drives the clock; no lockstep).
+SCALE=$(/usr/bin/python3 -c "import sys; print(max(1.0, float(sys.argv[1])))" "${TOPO_PLANNER_TIME_LIMIT_SCALE:-1}")
+PLAY_RATE=$(/usr/bin/python3 -c "import sys; print(0.5 / float(sys.argv[1]))" "$SCALE")
+FLIGHT_TIMEOUT=$(/usr/bin/python3 -c "import sys; print(int(300 * float(sys.argv[1])))" "$SCALE")
 MAP_ARGS="map_origin:=[-20.0,-20.0,0.3] map_size:=[40.0,40.0,3.4] max_vel:=2.5 max_acc:=2.5"
 
 # 1. The flight, 8 m through the seeded medium forest, in simulated time at half real time, with
 #    planner.launch's recording and the test's own recording of the map the planner built.
 port=$(free_port)
 export ROS_MASTER_URI=http://127.0.0.1:$port
-timeout --signal=INT --kill-after=20 300 roslaunch -p "$port" topo_planner simulation.launch rviz:=false \
+timeout --signal=INT --kill-after=20 "$FLIGHT_TIMEOUT" roslaunch -p "$port" topo_planner simulation.launch rviz:=false \
   sim_time:=true realtime_factor:=0.5 monitor:=true shutdown_when_done:=true output:=log \
   'goals:=[-7.0, 0.0, 1.0]' goal_timeout:=60 output_dir:="$WORK" name:=flight \
   record:=true bag_prefix:="$WORK/rec" >>"$LOG" 2>&1 &
@@ -101,7 +106,7 @@ if [ "${status[record]}" = pass ]; then
   launch=$!
   ok=false
   if wait_master "$port" 30; then
-    for _ in $(seq 300); do  # the planner is up when its heartbeat topic is advertised
+    for _ in $(seq "${FLIGHT_TIMEOUT}"); do  # the planner is up when its heartbeat topic is advertised
       rostopic list 2>/dev/null | grep -q '^/planning/heartbeat$' && ok=true && break
       sleep 0.1
     done
@@ -112,7 +117,7 @@ if [ "${status[record]}" = pass ]; then
     rec=$!
     sleep 2
     # shellcheck disable=SC2086
-    rosbag play --clock -r 0.5 -q "$flight_bag" --topics $INPUTS >>"$LOG" 2>&1
+    rosbag play --clock -r "$PLAY_RATE" -q "$flight_bag" --topics $INPUTS >>"$LOG" 2>&1
     sleep 3
     stop "$rec"
   fi
