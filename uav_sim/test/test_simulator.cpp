@@ -264,12 +264,10 @@ TEST_F(Simulator, CameraPublishesDepthFrames) {
       << "fewer than 3 depth images";
   sensor_msgs::Image image;
   sensor_msgs::CameraInfo info;
-  std::deque<ros::Time> pose_stamps;
   {
     std::lock_guard<std::mutex> l(obs.mutex);
     image = obs.image;
     info = obs.info;
-    pose_stamps = obs.pose_stamps;
   }
   EXPECT_EQ(image.width, 640u);
   EXPECT_EQ(image.height, 480u);
@@ -291,8 +289,15 @@ TEST_F(Simulator, CameraPublishesDepthFrames) {
   EXPECT_GT(finite, 1000u) << "the seeded forest should be in view";
   EXPECT_GE(nearest, 0.1f);
   EXPECT_LE(nearest, 6.0f);
-  // The pose of the image's stamp was published with it.
-  EXPECT_NE(std::find(pose_stamps.begin(), pose_stamps.end(), image.header.stamp), pose_stamps.end());
+  // The pose of the image's stamp was published with it (its callback may run after the image's).
+  const ros::Time stamp = image.header.stamp;
+  EXPECT_TRUE(waitFor(
+      [&] {
+        std::lock_guard<std::mutex> l(obs.mutex);
+        return std::find(obs.pose_stamps.begin(), obs.pose_stamps.end(), stamp) != obs.pose_stamps.end();
+      },
+      5.0))
+      << "no camera pose stamped " << stamp;
   EXPECT_EQ(info.width, 640u);
   EXPECT_NEAR(info.K[0], 387.229248046875, 1e-9);
 }
@@ -354,36 +359,38 @@ TEST_F(Simulator, FlyingIntoAnObstacleIsACollision) {
 }
 
 // The perception lockstep (simulator.test: perception_topic /test/depth_fused; this node plays the
-// mapping). After a frame fused at t0 the clock runs on to t0 + perception_max_lag_s (0.2 s) and
-// waits there for the next one; a frame fused then releases it; with none for perception_timeout_s
-// of wall time it runs on (a dead planner does not stop the clock). Last: the others run unheld.
+// mapping). A first frame fused arms it: the clock stops perception_max_lag_s (0.2 s) past it (or at
+// once, if the frame arrived later than that). Held there, a frame fused 0.1 s before the held time
+// lets the clock run exactly 0.1 s on (and one odometry batch, 5 ms), where it waits again; with no
+// frame for perception_timeout_s of wall time it runs on (a dead planner does not stop the clock).
+// Last: the other cases run unheld.
 TEST_F(Simulator, TheClockWaitsForTheMappingToFuseDepth) {
   if (!ros::Time::isSimTime()) GTEST_SKIP() << "the perception lockstep runs in sim time only";
   ros::Publisher fused = nh_->advertise<std_msgs::Header>("/test/depth_fused", 10);
   ASSERT_TRUE(waitFor([&] { return fused.getNumSubscribers() > 0; }, 10.0)) << "the simulator does not listen";
+  // The clock when it has not moved for 0.3 s of wall time (NaN while it moves).
+  auto heldClock = [] {
+    const double a = ros::Time::now().toSec();
+    ros::WallDuration(0.3).sleep();
+    const double b = ros::Time::now().toSec();
+    return a == b ? b : NAN;
+  };
   std_msgs::Header frame;
   frame.stamp = ros::Time::now();
   fused.publish(frame);
   const double t0 = frame.stamp.toSec(), lag = 0.2;
-  // Held: the clock stops within the lag (and one odometry batch, 5 ms) of the frame.
   double held = NAN;
-  ASSERT_TRUE(waitFor(
-      [&] {
-        const double a = ros::Time::now().toSec();
-        ros::WallDuration(0.3).sleep();
-        held = ros::Time::now().toSec();
-        return held == a && held > t0;
-      },
-      10.0))
-      << "the clock never stopped";
+  ASSERT_TRUE(waitFor([&] { return !std::isnan(held = heldClock()); }, 10.0)) << "the clock never stopped";
   EXPECT_GE(held, t0 + lag - 1e-6);
-  EXPECT_LE(held, t0 + lag + 0.006);
-  // A frame fused at the held time releases it.
-  frame.stamp = ros::Time::now();
+  // Held: a frame fused 0.1 s before the held time releases 0.1 s.
+  frame.stamp = ros::Time(held - 0.1);
   fused.publish(frame);
-  ASSERT_TRUE(waitFor([&] { return ros::Time::now().toSec() > held + 0.1; }, 10.0)) << "not released";
-  // No frame any more: held again, then on after the timeout (2 s of wall time).
-  ASSERT_TRUE(waitFor([&] { return ros::Time::now().toSec() > held + 1.0; }, 30.0)) << "held for good";
+  double again = NAN;
+  ASSERT_TRUE(waitFor([&] { return !std::isnan(again = heldClock()) && again > held; }, 10.0)) << "not released";
+  EXPECT_GE(again, held + 0.1 - 1e-6);
+  EXPECT_LE(again, held + 0.1 + 0.0051);
+  // No frame any more: on after the timeout (2 s of wall time).
+  ASSERT_TRUE(waitFor([&] { return ros::Time::now().toSec() > again + 1.0; }, 30.0)) << "held for good";
 }
 
 }  // namespace
