@@ -386,6 +386,7 @@ void FlightMonitor::replanCallback(const topo_planner::ReplanEventConstPtr& msg)
   r.trigger = msg->trigger;
   r.status = msg->status;
   r.fallback = msg->fallback;
+  r.message = msg->message;
   r.total_ms = msg->total_ms;
   r.trajectory_id = msg->trajectory_id;
   r.published = msg->trajectory_id >= 0;

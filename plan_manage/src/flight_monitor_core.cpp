@@ -630,12 +630,12 @@ bool writeTraceCsv(const std::string& path, const std::vector<TraceRow>& rows, s
 bool writeReplanCsv(const std::string& path, const std::vector<ReplanRecord>& replans, double start_t_s,
                     std::string* error) {
   std::ostringstream text;
-  text << "t,x,y,z,trigger,status,fallback,total_ms,trajectory_id,goal_index\n";
+  text << "t,x,y,z,trigger,status,fallback,total_ms,trajectory_id,goal_index,message\n";
   for (const ReplanRecord& r : replans) {
     text << fmt(r.t_s - start_t_s, 3) << ',' << fmt(r.position_m.x(), 4) << ',' << fmt(r.position_m.y(), 4)
          << ',' << fmt(r.position_m.z(), 4) << ',' << csvField(r.trigger) << ',' << csvField(r.status) << ','
          << csvField(r.fallback) << ',' << fmt(r.total_ms, 3) << ',' << r.trajectory_id << ',' << r.goal_index
-         << '\n';
+         << ',' << csvField(r.message) << '\n';
   }
   return writeFile(path, text.str(), error);
 }

@@ -409,6 +409,7 @@ TEST(FlightFiles, WrittenAndReadable) {
   r.trigger = "new_goal";
   r.status = "kNoPath, with a comma";
   r.fallback = "keep_current";
+  r.message = "2 x in collision, \"quoted\"";
   r.total_ms = 3.25;
   rec.addReplan(r);
   std::string error;
@@ -437,6 +438,10 @@ TEST(FlightFiles, WrittenAndReadable) {
   ASSERT_EQ(events.size(), 2u);
   EXPECT_NE(events[1].find("0.500,"), std::string::npos) << events[1];
   EXPECT_NE(events[1].find(",\"kNoPath, with a comma\","), std::string::npos) << events[1];
+  EXPECT_EQ(events[0].substr(events[0].rfind(',')), ",message");
+  const std::string message_field = ",\"2 x in collision, \"\"quoted\"\"\"";  // quoted, quotes doubled
+  ASSERT_GT(events[1].size(), message_field.size());
+  EXPECT_EQ(events[1].substr(events[1].size() - message_field.size()), message_field) << events[1];
   EXPECT_EQ(readLines(stem + "_map.csv").size(), 2u);
   EXPECT_EQ(readLines(stem + "_reference.csv").size(), 3u);
 

@@ -51,6 +51,7 @@ struct ReplanRecord {
   double t_s = 0.0;                                      ///< [s]
   Eigen::Vector3d position_m = Eigen::Vector3d::Zero();  ///< start of the planned trajectory [m]
   std::string trigger, status, fallback;
+  std::string message;     ///< the planner's account of the call (why it failed)
   double total_ms = 0.0;   ///< check + search + optimisation [ms]
   bool published = false;  ///< a trajectory came out
   int64_t trajectory_id = -1;
