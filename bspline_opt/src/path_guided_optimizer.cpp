@@ -348,7 +348,8 @@ void PathGuidedOptimizer::finish(const EsdfMap& map, OptimizationResult* result)
   const double band_allowed =
       std::max(bandExcess(spline.evaluate(0.0).z()), bandExcess(spline.evaluate(duration).z())) + 0.05;
   for (int k = 0; k <= intervals; ++k) {
-    const Eigen::Vector3d p = spline.evaluate(duration * k / intervals);
+    const double t_k = duration * k / intervals;
+    const Eigen::Vector3d p = spline.evaluate(t_k);
     if (bandExcess(p.z()) > band_allowed) out_of_band = true;
     const DistanceQuery q = map.query(p);
     if (q.status == QueryStatus::kOutOfMap || q.status == QueryStatus::kInvalidInput) {
@@ -356,7 +357,10 @@ void PathGuidedOptimizer::finish(const EsdfMap& map, OptimizationResult* result)
       continue;
     }
     if (q.status == QueryStatus::kUnknown && !config_.unknown_is_free) collision = true;
-    stats.min_clearance_m = std::min(stats.min_clearance_m, q.distance);
+    if (q.distance < stats.min_clearance_m) {
+      stats.min_clearance_m = q.distance;
+      stats.min_clearance_t_s = t_k;
+    }
     if (q.distance < config_.clearance_m) collision = true;
   }
   stats.check_samples = intervals + 1;

@@ -145,6 +145,30 @@ double UniformBspline::reallocateTime(double max_vel_mps, double max_acc_mps2) {
   return ratio;
 }
 
+bool UniformBspline::easeIntoStretch(double ratio, double ease_s, UniformBspline* out) const {
+  assert(out);
+  if (!isValid() || !(ratio >= 1.0) || !std::isfinite(ratio) || !(ease_s > 0.0) || !std::isfinite(ease_s)) return false;
+  const double duration = this->duration();
+  // Warped time tau(t) = t + (ratio - 1) W(t), W' = 1 - smoothstep(t / ease_s): tau'(0) = ratio,
+  // tau''(0) = 0, tau' = 1 from ease_s on, where W = ease_s / 2.
+  const double gain = ratio - 1.0;
+  const double end = duration - gain * 0.5 * ease_s;  // tau(end) = duration
+  if (!(end >= ease_s)) return false;
+  const auto tau = [&](double t) {
+    if (t >= ease_s) return t + gain * 0.5 * ease_s;
+    const double x = t / ease_s;
+    return t + gain * (t - ease_s * (x * x * x - 0.5 * x * x * x * x));
+  };
+  const int segments = std::max(1, int(std::ceil(end / knot_span_s_ - 1e-9)));
+  const double dt = end / segments;
+  std::vector<Eigen::Vector3d> points;
+  points.reserve(size_t(segments) + 1);
+  for (int k = 0; k <= segments; ++k) points.push_back(evaluate(std::min(duration, tau(k * dt))));
+  const UniformBspline vel = derivative(), acc = vel.derivative();
+  return fitToPoints(points, dt, ratio * vel.evaluate(0.0), ratio * ratio * acc.evaluate(0.0), vel.evaluate(duration),
+                     acc.evaluate(duration), degree_, out);
+}
+
 bool UniformBspline::fitToPoints(const std::vector<Eigen::Vector3d>& points, double interval_s,
                                  const Eigen::Vector3d& start_vel, const Eigen::Vector3d& start_acc,
                                  const Eigen::Vector3d& end_vel, const Eigen::Vector3d& end_acc, int degree,

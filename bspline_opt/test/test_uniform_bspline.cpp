@@ -209,6 +209,55 @@ TEST(UniformBspline, TimeReallocationBringsTooFastSplineWithinLimitsWithoutMovin
   }
 }
 
+// A cruising spline slowed down by a stretch of its time, eased back into its old pace at the start:
+// the start velocity and acceleration from before the stretch, the same path, the stretched end.
+TEST(UniformBspline, EaseIntoStretchKeepsTheStartPaceAndThePath) {
+  const double dt = 0.2;
+  std::vector<Eigen::Vector3d> points;
+  for (int k = 0; k <= 25; ++k) {
+    const double t = k * dt;
+    points.emplace_back(2.0 * t, 1.5 * std::sin(t), 0.3 * t);
+  }
+  UniformBspline original;
+  ASSERT_TRUE(UniformBspline::fitToPoints(points, dt, Eigen::Vector3d(2.0, 1.5, 0.3), Eigen::Vector3d::Zero(),
+                                          Eigen::Vector3d(2.0, 1.5 * std::cos(5.0), 0.3),
+                                          Eigen::Vector3d(0.0, -1.5 * std::sin(5.0), 0.0), 3, &original));
+  const double ratio = 1.4, ease_s = 1.0;
+  const UniformBspline stretched(original.controlPoints(), 3, dt * ratio);
+  UniformBspline eased;
+  ASSERT_TRUE(stretched.easeIntoStretch(ratio, ease_s, &eased));
+  const UniformBspline ov = original.derivative(), sv = stretched.derivative(), ev = eased.derivative();
+  EXPECT_LT((ev.evaluate(0.0) - ov.evaluate(0.0)).norm(), 1e-6);  // the old pace at the start
+  EXPECT_LT((ev.derivative().evaluate(0.0) - ov.derivative().evaluate(0.0)).norm(), 1e-6);
+  EXPECT_GT((sv.evaluate(0.0) - ov.evaluate(0.0)).norm(), 0.5);  // what the stretch had made of it
+  EXPECT_NEAR(eased.duration(), stretched.duration() - (ratio - 1.0) * 0.5 * ease_s, 1e-9);
+  EXPECT_LT((eased.evaluate(eased.duration()) - stretched.evaluate(stretched.duration())).norm(), 1e-9);
+  EXPECT_LT((ev.evaluate(eased.duration()) - sv.evaluate(stretched.duration())).norm(), 1e-6);
+  EXPECT_LE(eased.knotSpan(), stretched.knotSpan());
+  // The same path: every point of the eased spline lies on the original one (dense samples).
+  std::vector<Eigen::Vector3d> path;
+  for (int k = 0; k <= 5000; ++k) path.push_back(original.evaluate(original.duration() * k / 5000.0));
+  double worst = 0.0;
+  for (int k = 0; k <= 500; ++k) {
+    const Eigen::Vector3d p = eased.evaluate(eased.duration() * k / 500.0);
+    double nearest = INFINITY;
+    for (const Eigen::Vector3d& q : path) nearest = std::min(nearest, (p - q).norm());
+    worst = std::max(worst, nearest);
+  }
+  EXPECT_LT(worst, 0.02);
+  // After the easing, the stretched pace, (ratio - 1) * ease_s / 2 ahead of the stretched clock.
+  for (double t = ease_s + 0.5; t < eased.duration() - 0.5; t += 0.25)
+    EXPECT_LT((ev.evaluate(t) - sv.evaluate(t + (ratio - 1.0) * 0.5 * ease_s)).norm(), 0.1) << t;
+  // Refused: no stretch to undo, a bad easing time, a spline too short to ease over.
+  UniformBspline untouched = eased;
+  EXPECT_FALSE(stretched.easeIntoStretch(0.9, ease_s, &untouched));
+  EXPECT_FALSE(stretched.easeIntoStretch(ratio, std::nan(""), &untouched));
+  EXPECT_FALSE(stretched.easeIntoStretch(ratio, 0.0, &untouched));
+  EXPECT_FALSE(stretched.easeIntoStretch(INFINITY, ease_s, &untouched));
+  EXPECT_FALSE(stretched.easeIntoStretch(ratio, 100.0, &untouched));
+  EXPECT_EQ(untouched.controlPoints(), eased.controlPoints());
+}
+
 TEST(UniformBspline, Validity) {
   const Eigen::MatrixX3d q = randomControlPoints(8, 1);
   std::string why;

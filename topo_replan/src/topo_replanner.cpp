@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <iomanip>
 #include <sstream>
 
@@ -287,7 +288,7 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
     if (checked.status == OptimizationStatus::kSuccess) {
       result.status = ReplanStatus::kSuccess;
       result.trajectory = checked.spline;
-      result.stats.start_repaired = repairStart(request.start, map, &result.trajectory);
+      result.stats.start_repaired = repairStart(request.start, map, 1.0, &result.trajectory, nullptr);
       result.stats.start_velocity_jump_mps =
           (result.trajectory.derivative().evaluate(0.0) - request.start.velocity).norm();
       result.stats.total_ms = msSince(t_begin);
@@ -329,7 +330,8 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
         c.selection_cost = c.result.cost.jerk_integral_m2ps5 + config_.duration_weight * c.result.cost.duration_s;
         // Time reallocation scaled the start velocity: restore it here, per candidate, so the choice
         // can prefer a candidate that joins the current trajectory without a velocity step.
-        c.start_repaired = repairStart(request.start, map, &c.result.spline);
+        c.start_repaired =
+            repairStart(request.start, map, c.result.stats.time_ratio, &c.result.spline, &c.repair_note);
         c.start_velocity_step_mps = (c.result.spline.derivative().evaluate(0.0) - request.start.velocity).norm();
       }
     });
@@ -374,36 +376,83 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
     for (int st = 0; st <= int(OptimizationStatus::kInvalidInput); ++st) {
       int count = 0;
       double best_clearance = -INFINITY, best_ratio = INFINITY;
+      const ReplanCandidate* best = nullptr;
       for (const ReplanCandidate& c : result.candidates)
         if (int(c.result.status) == st) {
           ++count;
+          if (c.result.stats.min_clearance_m > best_clearance) best = &c;
           best_clearance = std::max(best_clearance, c.result.stats.min_clearance_m);
           best_ratio = std::min(best_ratio, c.result.stats.time_ratio);
         }
       if (count == 0) continue;
       why << " " << count << " x " << toString(OptimizationStatus(st));
-      if (OptimizationStatus(st) == OptimizationStatus::kInCollision)
-        why << " (best min clearance " << std::fixed << std::setprecision(2) << best_clearance << " m)";
+      if (OptimizationStatus(st) == OptimizationStatus::kInCollision && best) {
+        // Where: the closest point of the best candidate, and how far along it (for the logs).
+        const double t_min = best->result.stats.min_clearance_t_s;
+        const Eigen::Vector3d p = best->result.spline.evaluate(t_min);
+        why << " (best min clearance " << std::fixed << std::setprecision(2) << best_clearance << " m at ("
+            << p.x() << ", " << p.y() << ", " << p.z() << "), " << t_min << " of " << best->result.spline.duration()
+            << " s)";
+      }
       if (OptimizationStatus(st) == OptimizationStatus::kInfeasible)
         why << " (least time ratio " << std::fixed << std::setprecision(2) << best_ratio << ")";
       why << ";";
     }
     std::string message = why.str();
     message.pop_back();
+    char ends[160];
+    std::snprintf(ends, sizeof(ends), "; from (%.2f, %.2f, %.2f) to the local goal (%.2f, %.2f, %.2f)%s", lp.start.x(),
+                  lp.start.y(), lp.start.z(), lp.goal.x(), lp.goal.y(), lp.goal.z(),
+                  result.stats.used_astar ? ", A* guide tried" : "");
+    message += ends;
     return fail(ReplanStatus::kOptimizationFailed, message);
   }
   result.status = ReplanStatus::kSuccess;
   result.trajectory = result.candidates[size_t(result.chosen)].result.spline;
+  if (result.candidates[size_t(result.chosen)].start_velocity_step_mps > config_.max_start_velocity_step_mps)
+    result.message = "start velocity not restored: " + result.candidates[size_t(result.chosen)].repair_note;
   result.stats.start_repaired = result.candidates[size_t(result.chosen)].start_repaired;
   result.stats.start_velocity_jump_mps = (result.trajectory.derivative().evaluate(0.0) - request.start.velocity).norm();
   result.stats.total_ms = msSince(t_begin);
   return result;
 }
 
-bool TopoReplanner::repairStart(const FlatState& start, const EsdfMap& map, UniformBspline* trajectory) const {
+bool TopoReplanner::repairStart(const FlatState& start, const EsdfMap& map, double time_ratio,
+                                UniformBspline* trajectory, std::string* why) const {
+  // What each try came to, for the logs: "eased 1.0 s: limits exceeded (v 3.02, a 2.61)".
+  std::ostringstream notes;
+  notes << std::fixed << std::setprecision(2) << "time ratio " << time_ratio;
+  const auto note = [&](const char* what, const OptimizationResult& r) {
+    notes << "; " << what << ": " << toString(r.status) << " (v " << r.stats.max_vel_mps << ", a "
+          << r.stats.max_acc_mps2 << ", clearance " << r.stats.min_clearance_m << ")";
+  };
+  const auto give_up = [&](const char* what) {
+    if (what) notes << "; " << what;
+    if (why) *why = notes.str();
+    return false;
+  };
   const UniformBspline vel = trajectory->derivative();
   const Eigen::Vector3d v0 = vel.evaluate(0.0), a0 = vel.derivative().evaluate(0.0);
   if ((v0 - start.velocity).norm() < 1e-6 && (a0 - start.acceleration).norm() < 1e-6) return false;
+  // The same path, with the start's pace from before the stretch, easing into the stretched one.
+  if (time_ratio > 1.0)
+    for (const double ease_s : {1.0, 0.5, 2.0}) {
+      UniformBspline eased;
+      if (!trajectory->easeIntoStretch(time_ratio, ease_s, &eased)) continue;
+      const UniformBspline eased_vel = eased.derivative();
+      // Only a trajectory stretched from this start state: its eased start is that state.
+      if ((eased_vel.evaluate(0.0) - start.velocity).norm() > 1e-3 ||
+          (eased_vel.derivative().evaluate(0.0) - start.acceleration).norm() > 1e-2) {
+        notes << "; eased: not from this start";
+        break;
+      }
+      const OptimizationResult checked = checker_.check(eased, map);
+      if (checked.status == OptimizationStatus::kSuccess) {
+        *trajectory = eased;
+        return true;
+      }
+      note(ease_s == 1.0 ? "eased 1.0 s" : ease_s == 0.5 ? "eased 0.5 s" : "eased 2.0 s", checked);
+    }
   const double dt = trajectory->knotSpan(), duration = trajectory->duration();
   const int segments = trajectory->numSegments();
   std::vector<Eigen::Vector3d> points;
@@ -412,14 +461,19 @@ bool TopoReplanner::repairStart(const FlatState& start, const EsdfMap& map, Unif
   UniformBspline refit;
   if (!UniformBspline::fitToPoints(points, dt, start.velocity, start.acceleration, vel.evaluate(duration),
                                    vel.derivative().evaluate(duration), trajectory->degree(), &refit))
-    return false;
-  if (checker_.check(refit, map).status != OptimizationStatus::kSuccess) {
+    return give_up("refit: no fit");
+  const OptimizationResult refit_check = checker_.check(refit, map);
+  if (refit_check.status != OptimizationStatus::kSuccess) {
+    note("refit", refit_check);
     // The refit breaks a limit or grazes an obstacle: refine it once more (its first and last
     // control points, the start and end states, stay fixed), checked without stretching time.
     const OptimizationResult again = checker_.refinePhase(refit, map);
-    if (again.status != OptimizationStatus::kSuccess) return false;
+    if (again.status != OptimizationStatus::kSuccess) return give_up("refined: NLopt failed");
     const OptimizationResult checked = checker_.check(again.spline, map);
-    if (checked.status != OptimizationStatus::kSuccess) return false;
+    if (checked.status != OptimizationStatus::kSuccess) {
+      note("refined", checked);
+      return give_up(nullptr);
+    }
     refit = checked.spline;
   }
   *trajectory = refit;

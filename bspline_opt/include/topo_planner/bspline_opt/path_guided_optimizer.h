@@ -60,6 +60,7 @@ struct OptimizationStats {
   int best_run = 0;        ///< the run the result comes from (0 = unperturbed)
   double time_ratio = 1.0;     ///< duration after / before time reallocation
   double min_clearance_m = 0.0;  ///< smallest ESDF distance over the curve samples [m]
+  double min_clearance_t_s = 0.0;  ///< curve time of that sample [s]
   int check_samples = 0;        ///< curve samples of the final check
   double max_vel_mps = 0.0;     ///< bound from the velocity control points of the result
   double max_acc_mps2 = 0.0;    ///< bound from the acceleration control points of the result

@@ -72,6 +72,15 @@ class UniformBspline {
   /// accelerations scale with the rest. Preconditions: isValid(), positive limits.
   double reallocateTime(double max_vel_mps, double max_acc_mps2);
 
+  /// Undoes a time reallocation at the start only: this spline was lengthened by `ratio` (e.g. by
+  /// reallocateTime()); the result follows the same path, but its clock runs `ratio` times faster
+  /// at t = 0 and eases to this spline's pace over `ease_s` (a smoothstep), so it starts with the
+  /// velocity and acceleration from before the stretch (ratio * v(0), ratio^2 * a(0)) and ends as
+  /// this one does, (ratio - 1) * ease_s / 2 sooner. A fit through the warped positions
+  /// (fitToPoints) at a knot span at most this one's. False (out unchanged) when ratio < 1, ease_s
+  /// <= 0 or not finite, the spline is too short to ease over, or the fit fails.
+  bool easeIntoStretch(double ratio, double ease_s, UniformBspline* out) const;
+
   /// Basis weights N_0(u)..N_p(u) of one segment of a uniform degree-p spline, u in [0, 1].
   static Eigen::VectorXd basis(int degree, double u);
 

@@ -9,8 +9,10 @@
 //
 // Start state: the optimiser keeps the start control points, but its time reallocation (stretching
 // the knot span to meet the limits) scales the start velocity and acceleration too. The chosen
-// trajectory is then refitted through its own knot positions with the exact start derivatives and
-// checked again (without reallocation); when that refit fails the check it is refined once more
+// trajectory is then first eased into the stretch (UniformBspline::easeIntoStretch: the same path,
+// the pace from before the stretch at the start, the stretched pace after 1 s, else 0.5 s or 2 s)
+// and checked again (without reallocation); failing that, refitted through its own knot positions
+// with the exact start derivatives and checked; when that refit fails the check it is refined once more
 // (start and end states fixed) and checked; when that fails too the stretched trajectory is kept
 // and the velocity step is reported (stats.start_velocity_jump_mps).
 //
@@ -96,6 +98,7 @@ struct ReplanCandidate {
   double selection_cost = INFINITY;  ///< see the class comment; +inf when it failed
   bool start_repaired = false;          ///< its start velocity was restored after time reallocation
   double start_velocity_step_mps = 0.0; ///< what remains of the start velocity's change [m/s]
+  std::string repair_note;              ///< why the start could not be restored (for the logs)
 };
 
 struct ReplanStats {
@@ -178,7 +181,9 @@ class TopoReplanner {
   Config config_;
   ThreadPool pool_;
   /// The refit described in the class comment; false (trajectory unchanged) when not needed or not safe.
-  bool repairStart(const FlatState& start, const EsdfMap& map, UniformBspline* trajectory) const;
+  /// `time_ratio`: the stretch of the reallocation (1: none).
+  bool repairStart(const FlatState& start, const EsdfMap& map, double time_ratio, UniformBspline* trajectory,
+                   std::string* why) const;
   /// An initial spline along `guide`, timed for its length, when the guide is longer than
   /// guide_timing_ratio times the reference segment (a candidate that failed from the segment's
   /// timing is optimised again from it); nullopt otherwise.
