@@ -1460,6 +1460,14 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
       return;
     }
     if (backoff) {
+      // Holding there did not show the way on: a stall. The route rebuilt after the back-off weighs
+      // against the place (another opening, another side), as the progress remedy's routes do: the
+      // zone lies ahead along the way (where the progress is tracked), else around the hold.
+      const bool tracked = config_.progress_timeout_s > 0.0 && progress_.active();
+      if (config_.stall_zone_radius_m > 0.0)
+        stall_zones_.push_back({tracked ? progress_.ahead(config_.stall_zone_radius_m) : look_hold_position_,
+                                config_.stall_zone_radius_m});
+      route_stale_ = true;
       event.message += (event.message.empty() ? "" : "; ") + std::string("held at the edge of the known space ") +
                        std::to_string(config_.max_look_holds) + " times; " + backoff_report;
       startManoeuvreLocked(*backoff, true, &event, out, backoff_report);

@@ -598,6 +598,59 @@ TEST(ReplanFsm, ReroutesAroundWhereItStalled) {
   }
 }
 
+// The same wall with back-offs on and no progress remedy in time: the plans are cut to a hold before the
+// notch; after max_look_holds holds the FSM backs off, and the place it held at is a stall zone, so
+// the route rebuilt from the back-off goes through the window. Without the zone (stall_zone_radius_m
+// 0) the new route leads back to the notch, the holds and back-offs repeat until none is left, and it
+// holds there until the mission's time limit.
+TEST(ReplanFsm, AvoidsThePlaceItHeldAtAfterBackingOff) {
+  Corridor c;
+  c.scene.fill([](const Eigen::Vector3d& p) {
+    const bool wall = p.x() >= 10.0 && p.x() <= 10.4;
+    const bool window = std::abs(p.y() - 1.0) <= 0.6 && std::abs(p.z() - 1.3) <= 0.6;
+    const bool notch = std::abs(p.y() - 4.0) <= 1.0 && p.z() >= 2.0;
+    return wall && !window && !notch;
+  });
+  c.scene.fill([](const Eigen::Vector3d& p) {
+    return p.x() >= 9.0 && p.x() <= 11.4 && std::abs(p.y() - 4.0) <= 1.0 && p.z() >= 2.0;
+  }, VoxelState::kUnknown);
+  const EsdfMap& map = c.scene.finish();
+  auto mapAt = [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; };
+  // Progress tracked (the zone lies ahead along the way; no remedy within the mission's time limit),
+  // or not tracked (the zone is around the hold).
+  const std::pair<double, double> cases[] = {{1.5, 100.0}, {1.5, 0.0}, {0.0, 100.0}};
+  for (const auto& [zone_radius_m, progress_timeout_s] : cases) {
+    SCOPED_TRACE("stall_zone_radius_m " + std::to_string(zone_radius_m) + ", progress_timeout_s " +
+                 std::to_string(progress_timeout_s));
+    ReplanFsm::Config config = testConfig();
+    config.max_backoffs = 3;
+    config.progress_timeout_s = progress_timeout_s;
+    config.mission_timeout_s = 40.0;
+    config.stall_zone_radius_m = zone_radius_m;
+    auto fsm = makeFsm(config);
+    const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, mapAt, 1600, map);
+    EXPECT_GT(log.min_clearance, config.safety_clearance_m);
+    expectContinuous(log.trajectories, config.max_start_velocity_step_mps + 1e-6);
+    int backoffs = 0;
+    for (const FsmEvent& e : log.events)
+      backoffs += e.fallback == "back_off" && e.message.find("held at the edge of the known space") != std::string::npos;
+    if (zone_radius_m == 0.0) {
+      EXPECT_FALSE(log.goal_reached);
+      EXPECT_EQ(backoffs, config.max_backoffs);
+      EXPECT_EQ(fsm->lastGoalStatus(), GoalStatus::kGivenUp);
+      continue;
+    }
+    EXPECT_TRUE(log.goal_reached);
+    EXPECT_EQ(backoffs, 1);
+    bool through_window = false;
+    for (size_t i = 1; i < log.flown.size(); ++i)
+      if ((log.flown[i - 1].x() - 10.2) * (log.flown[i].x() - 10.2) <= 0.0)
+        through_window = std::abs(log.flown[i].y() - 1.0) < 0.6;
+    EXPECT_TRUE(through_window);
+    std::printf("held at a notch never seen: goal reached in %.1f s after %d back-off(s)\n", log.duration_s, backoffs);
+  }
+}
+
 // The height band (route.min_z_m, max_z_m) is a geofence for what is flown, not only for the route:
 // a wall 2 m high across the corridor with a low window (0.4-1.2 m) on the line. With the band's top
 // at 2.2 m the route goes through the window, yet the local planner's best candidates go over the
