@@ -318,14 +318,18 @@ void PathGuidedOptimizer::finish(const EsdfMap& map, OptimizationResult* result)
   result->status = OptimizationStatus::kSuccess;
   result->message.clear();
 
-  // Feasibility first (it does not move the path): stretch time when allowed.
+  // Feasibility first (it does not move the path): stretch time when allowed. The limits, or the
+  // end states' own bounds where those exceed them: a curve that starts in a state beyond a limit
+  // (the hard braking it is planned from) can never meet it; it may keep that state, not exceed it.
   const double duration_before = spline.duration();
-  if (config_.reallocate_time) spline.reallocateTime(config_.max_vel_mps, config_.max_acc_mps2);
+  const double vel_limit = std::max(config_.max_vel_mps, spline.boundaryVelocity());
+  const double acc_limit = std::max(config_.max_acc_mps2, spline.boundaryAcceleration());
+  if (config_.reallocate_time) spline.reallocateTime(vel_limit, acc_limit);
   stats.time_ratio = spline.duration() / duration_before;
   stats.max_vel_mps = spline.maxVelocity();
   stats.max_acc_mps2 = spline.maxAcceleration();
-  const bool feasible = stats.max_vel_mps <= config_.max_vel_mps * (1.0 + 1e-9) &&
-                        stats.max_acc_mps2 <= config_.max_acc_mps2 * (1.0 + 1e-9) &&
+  const bool feasible = stats.max_vel_mps <= vel_limit * (1.0 + 1e-9) &&
+                        stats.max_acc_mps2 <= acc_limit * (1.0 + 1e-9) &&
                         stats.time_ratio <= config_.max_time_ratio;
 
   // Collision check on the curve: time steps short enough that consecutive samples are at most

@@ -107,7 +107,7 @@ double UniformBspline::jerkIntegral() const {
   return integral;
 }
 
-double UniformBspline::maxDifferenceNorm(int order) const {
+double UniformBspline::maxDifferenceNorm(int order, bool ends) const {
   const int n = numControlPoints();
   if (n <= order) return 0.0;
   // Binomial coefficients with alternating signs: the order-th forward difference.
@@ -119,6 +119,8 @@ double UniformBspline::maxDifferenceNorm(int order) const {
   }
   double best_sq = 0.0;
   for (int i = 0; i + order < n; ++i) {
+    // Difference i reads control points i..i + order: within the first degree_, or the last.
+    if (ends && i + order >= degree_ && i < n - degree_) continue;
     Eigen::Vector3d d = Eigen::Vector3d::Zero();
     for (int j = 0; j <= order; ++j) d += coeff[j] * control_points_.row(i + order - j).transpose();
     best_sq = std::max(best_sq, d.squaredNorm());
@@ -129,6 +131,10 @@ double UniformBspline::maxDifferenceNorm(int order) const {
 double UniformBspline::maxVelocity() const { return degree_ >= 1 ? maxDifferenceNorm(1) : 0.0; }
 
 double UniformBspline::maxAcceleration() const { return degree_ >= 2 ? maxDifferenceNorm(2) : 0.0; }
+
+double UniformBspline::boundaryVelocity() const { return degree_ >= 1 ? maxDifferenceNorm(1, true) : 0.0; }
+
+double UniformBspline::boundaryAcceleration() const { return degree_ >= 2 ? maxDifferenceNorm(2, true) : 0.0; }
 
 double UniformBspline::reallocateTime(double max_vel_mps, double max_acc_mps2) {
   assert(isValid() && max_vel_mps > 0.0 && max_acc_mps2 > 0.0);

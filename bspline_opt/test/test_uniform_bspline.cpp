@@ -258,6 +258,28 @@ TEST(UniformBspline, EaseIntoStretchKeepsTheStartPaceAndThePath) {
   EXPECT_EQ(untouched.controlPoints(), eased.controlPoints());
 }
 
+// The end states' bounds: the difference control points computed from the first and the last
+// degree() control points only.
+TEST(UniformBspline, BoundaryBoundsReadTheEndControlPointsOnly) {
+  for (uint32_t seed = 0; seed < 5; ++seed) {
+    const UniformBspline s(randomControlPoints(12, 300 + seed, 2.0), 3, 0.2);
+    const Eigen::MatrixX3d& q = s.controlPoints();
+    const int n = int(q.rows());
+    double vel = 0.0, acc = 0.0;
+    for (const int i : {0, 1, n - 3, n - 2}) vel = std::max(vel, (q.row(i + 1) - q.row(i)).norm() / 0.2);
+    for (const int i : {0, n - 3}) acc = std::max(acc, (q.row(i + 2) - 2.0 * q.row(i + 1) + q.row(i)).norm() / 0.04);
+    EXPECT_NEAR(s.boundaryVelocity(), vel, 1e-9);
+    EXPECT_NEAR(s.boundaryAcceleration(), acc, 1e-9);
+    EXPECT_LE(s.boundaryVelocity(), s.maxVelocity());
+    EXPECT_LE(s.boundaryAcceleration(), s.maxAcceleration());
+  }
+  // Fixed by the end states: a fit with a given start velocity and acceleration has them as bounds.
+  const UniformBspline line = UniformBspline::straightLine({0, 0, 0}, {5, 0, 0}, 12, 3, 0.3);  // rest to rest
+  EXPECT_NEAR(line.boundaryVelocity(), 0.0, 1e-12);
+  EXPECT_NEAR(line.boundaryAcceleration(), 0.0, 1e-12);
+  EXPECT_GT(line.maxVelocity(), 1.0);
+}
+
 TEST(UniformBspline, Validity) {
   const Eigen::MatrixX3d q = randomControlPoints(8, 1);
   std::string why;

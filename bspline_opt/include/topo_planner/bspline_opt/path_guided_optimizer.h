@@ -15,7 +15,9 @@
 //  * Final check: the curve is sampled at most a check step apart in arc length (half a voxel by
 //    default; the time step is the step over the speed bound) on the true ESDF (trilinear
 //    EsdfMap::query) against clearance_m, and the limits are checked on the derivative control
-//    points (convex hull bound, so they hold along the whole curve).
+//    points (convex hull bound, so they hold along the whole curve). Where the boundary states alone
+//    exceed a limit (a plan started from hard braking), the limit is raised to what they reach
+//    (UniformBspline::boundaryAcceleration): such a curve can keep that state, not go beyond it.
 //
 // GTO is phase 2 alone from the initial spline, then the same reallocation and check; the restart
 // variant runs it from the initial spline and from n - 1 perturbed copies (seeded), keeping the best.

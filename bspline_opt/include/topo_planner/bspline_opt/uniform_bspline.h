@@ -65,6 +65,12 @@ class UniformBspline {
   /// max_i ||A_i|| over the acceleration control points: an upper bound of ||a(t)|| [m/s^2].
   double maxAcceleration() const;
 
+  /// The same bounds over the control points the two end states fix (the first and the last
+  /// degree() control points, i.e. position, velocity and acceleration at t = 0 and at the end):
+  /// what any spline with these end states and this knot span reaches [m/s], [m/s^2].
+  double boundaryVelocity() const;
+  double boundaryAcceleration() const;
+
   /// Time reallocation: when maxVelocity() > max_vel_mps or maxAcceleration() > max_acc_mps2,
   /// lengthens the knot span by the smallest ratio r that brings both within the limits
   /// (velocity scales by 1/r, acceleration by 1/r^2) and returns r; returns 1 and changes nothing
@@ -103,8 +109,9 @@ class UniformBspline {
                                      int num_control_points, int degree, double knot_span_s);
 
  private:
-  // Largest norm among the rows of the n-th difference of the control points, divided by dt^n.
-  double maxDifferenceNorm(int order) const;
+  // Largest norm among the rows of the n-th difference of the control points, divided by dt^n;
+  // with `ends`, only among those computed from the first or the last degree() control points.
+  double maxDifferenceNorm(int order, bool ends = false) const;
 
   Eigen::MatrixX3d control_points_;
   int degree_ = 3;
