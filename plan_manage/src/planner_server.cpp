@@ -465,6 +465,7 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("fsm/stopped_speed_mps", f.stopped_speed_mps);
   r.read("fsm/max_plan_failures", f.max_plan_failures);
   r.read("fsm/rest_retry_interval_s", f.rest_retry_interval_s);
+  r.read("fsm/moving_retry_interval_s", f.moving_retry_interval_s);
   r.read("fsm/escape_clearance_m", f.escape_clearance_m);
   r.read("fsm/escape_min_clearance_m", f.escape_min_clearance_m);
   r.read("fsm/escape_speed_mps", f.escape_speed_mps);

@@ -160,6 +160,7 @@ void fuzzPlanner(FuzzInput& in) {
   p.optimizer.max_acc_mps2 = in.number(p.optimizer.max_acc_mps2);
   p.astar.clearance_m = in.number(p.astar.clearance_m);
   f.rest_retry_interval_s = in.number(f.rest_retry_interval_s);  // read last: the corpus keeps its layout
+  f.moving_retry_interval_s = in.number(f.moving_retry_interval_s);
 
   std::string why;
   if (!f.validate(&why)) {

@@ -198,6 +198,8 @@ bool ReplanFsm::Config::validate(std::string* why) const {
   if (reroute_after_failures < 1) return bad("reroute_after_failures must be >= 1");
   if (!(rest_retry_interval_s >= 0.0 && rest_retry_interval_s <= 10.0))
     return bad("rest_retry_interval_s must be in [0, 10] s");
+  if (!(moving_retry_interval_s >= 0.0 && moving_retry_interval_s <= 10.0))
+    return bad("moving_retry_interval_s must be in [0, 10] s");
   if (!(backoff_length_m >= 0.0) || !(max_backoff_length_m >= backoff_length_m) || !(max_backoff_length_m <= 20.0))
     return bad("backoff lengths must satisfy 0 <= backoff_length_m <= max_backoff_length_m <= 20");
   if (max_backoffs < 0) return bad("max_backoffs must be >= 0");
@@ -1539,6 +1541,7 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
       failures_at_stall_ = consecutive_failures_;
     }
     if (event.fallback == "hover_retry") rest_retry_after_s_ = finished + config_.rest_retry_interval_s;
+    if (event.fallback == "keep_current") moving_retry_after_s_ = finished + config_.moving_retry_interval_s;
     // The way looks blocked (no guide path, no free local goal) or plans keep failing: re-route.
     const bool blocked = result.status == ReplanStatus::kNoPath || result.status == ReplanStatus::kGoalInCollision;
     if (config_.global_route && !superseded && !giving_up && !escape &&
@@ -1667,20 +1670,23 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
         }
         break;
       }
+      // A trajectory cut before unknown space is replanned before its stop begins, so a plan on the
+      // grown map takes over while the vehicle still cruises; one that ends moving, early enough
+      // before it runs out that a failed plan still leaves retries before checkSafety() must brake.
+      const bool running_out = !current_->ends_at_goal &&
+                               (ended || current_->endTime() - t <= stopTimeLocked(t) + 0.5 * config_.replan_interval_s ||
+                                (current_->stops_before_unknown &&
+                                 current_->brake_start_s - t <= takeover_delay_s_ + 0.5 * config_.replan_interval_s));
+      const bool periodic = !current_->ends_at_goal && t - current_->start_time_s >= config_.replan_interval_s;
       if (jumped) {
         plan(t, map, FsmEvent::Trigger::kTimeJump, &lock, &out, now);
       } else if (collision_ahead_) {
         plan(t, map, consecutive_failures_ > 0 ? FsmEvent::Trigger::kRetry : FsmEvent::Trigger::kCollisionAhead,
              &lock, &out, now);
-      } else if (!current_->ends_at_goal &&
-                 (t - current_->start_time_s >= config_.replan_interval_s || ended ||
-                  current_->endTime() - t <= stopTimeLocked(t) + 0.5 * config_.replan_interval_s ||
-                  (current_->stops_before_unknown &&
-                   current_->brake_start_s - t <= takeover_delay_s_ + 0.5 * config_.replan_interval_s))) {
-        // A trajectory cut before unknown space is replanned before its stop begins, so a plan on the
-        // grown map takes over while the vehicle still cruises.
-        // Periodically, and early enough before a trajectory that ends moving runs out that a
-        // failed plan still leaves retries before checkSafety() must brake for it.
+      } else if (running_out || periodic) {
+        // Retries of a failed periodic replan are paced while the trajectory flown stays safe for a
+        // while (moving_retry_interval_s); when it runs out soon, at every tick.
+        if (consecutive_failures_ > 0 && !running_out && t < moving_retry_after_s_) break;
         plan(t, map, consecutive_failures_ > 0 ? FsmEvent::Trigger::kRetry : FsmEvent::Trigger::kPeriodic, &lock,
              &out, now);
       }

@@ -421,7 +421,8 @@ bool TopoReplanner::repairStart(const FlatState& start, const EsdfMap& map, doub
                                 UniformBspline* trajectory, std::string* why) const {
   // What each try came to, for the logs: "eased 1.0 s: limits exceeded (v 3.02, a 2.61)".
   std::ostringstream notes;
-  notes << std::fixed << std::setprecision(2) << "time ratio " << time_ratio;
+  notes << std::fixed << std::setprecision(2) << "start |v| " << start.velocity.norm() << ", |a| "
+        << start.acceleration.norm() << "; time ratio " << time_ratio;
   const auto note = [&](const char* what, const OptimizationResult& r) {
     notes << "; " << what << ": " << toString(r.status) << " (v " << r.stats.max_vel_mps << ", a "
           << r.stats.max_acc_mps2 << ", clearance " << r.stats.min_clearance_m << ")";

@@ -36,6 +36,7 @@ ReplanFsm::Config testConfig() {
   c.replanner.local_goal_margin_m = 2.0;  // the planner node's
   c.depth_timeout_s = 0.0;  // these maps are given, not fused (the liveness tests turn it on)
   c.rest_retry_interval_s = 0.25;  // the planner node's
+  c.moving_retry_interval_s = 0.25;
   return c;
 }
 
@@ -362,6 +363,39 @@ TEST(ReplanFsm, StopsBeforeAWallWithNoWayAround) {
     }
     EXPECT_EQ(tries, config.max_plan_failures);
   }
+}
+
+// A wall across the whole corridor without the global route, seen from afar: once the horizon
+// reaches it the replans fail while the trajectory flown (which ends before it) is still safe
+// (keep_current). Those retries are paced (moving_retry_interval_s) until the trajectory runs out,
+// not one per tick; the vehicle stops before the wall all the same.
+TEST(ReplanFsm, PacesFailedReplansWhileTheTrajectoryFlownIsSafe) {
+  Corridor before, after;
+  after.scene.box({16.0, -1.0, -1.0}, {16.4, 9.0, 4.0});
+  const EsdfMap& unknown = before.scene.finish();
+  const EsdfMap& revealed = after.scene.finish();
+  int kept_paced = 0, kept_every_tick = 0;
+  for (const double interval_s : {0.25, 0.0}) {
+    SCOPED_TRACE("moving_retry_interval_s " + std::to_string(interval_s));
+    ReplanFsm::Config config = testConfig();
+    config.global_route = false;
+    config.moving_retry_interval_s = interval_s;
+    auto fsm = makeFsm(config);
+    const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}},
+                              [&](double, const Eigen::Vector3d& p) -> const EsdfMap& { return p.x() < 5.0 ? unknown : revealed; },
+                              600, revealed);
+    EXPECT_FALSE(log.goal_reached);
+    EXPECT_GT(log.min_clearance, config.safety_clearance_m);
+    EXPECT_LT(log.flown.back().x(), 16.0 - config.safety_clearance_m);
+    expectContinuous(log.trajectories);
+    int kept = 0;
+    for (const FsmEvent& e : log.events) kept += e.fallback == "keep_current";
+    EXPECT_GT(kept, 0);
+    (interval_s > 0.0 ? kept_paced : kept_every_tick) = kept;
+  }
+  std::printf("failed replans kept the current trajectory %d times paced, %d times at every tick\n", kept_paced,
+              kept_every_tick);
+  EXPECT_LT(4 * kept_paced, 3 * kept_every_tick);
 }
 
 // A wall across the corridor whose only window lies 9 m aside of the straight line, outside the

@@ -50,7 +50,8 @@
 // place max_look_holds times (the way on lies in unknown space the camera does not see by turning),
 // back off along the flown path (at most max_backoffs times per mission) and re-route from there;
 // with no back-off left, max_plan_failures failures at rest call the stall remedy below at once.
-// At rest, failed plans are retried every rest_retry_interval_s, not at every tick.
+// At rest, failed plans are retried every rest_retry_interval_s, not at every tick; moving on a
+// trajectory that stays safe for a while, every moving_retry_interval_s.
 // Stalls with every plan succeeding (hovering at the edge of the known space, creeping, shuttling)
 // are caught by progress, not by failures: the distance left along the mission's way
 // (MissionProgress) must shrink by progress_min_gain_m within progress_timeout_s; each time it does
@@ -246,6 +247,11 @@ class ReplanFsm {
     /// roadmap; the map and the start do not change faster) rather than at every tick; 0: every
     /// tick [s].
     double rest_retry_interval_s = 0.0;
+    /// Moving on a trajectory that stays safe (no collision ahead, its end or its brake point not
+    /// near), a failed periodic replan is tried again this long after it ended rather than at every
+    /// tick (the trajectory flown is fine; each try costs a planning call); with a collision ahead
+    /// or the trajectory running out, at every tick. 0: every tick [s].
+    double moving_retry_interval_s = 0.0;
     /// A vehicle at rest that the replanner refuses as kStartInCollision first moves up the distance
     /// field (plan_env ascendDistance) until it is this far from obstacles (interpolated ESDF) [m].
     double escape_clearance_m = 0.45;
@@ -505,6 +511,7 @@ class ReplanFsm {
   bool force_stall_ = false;              // failures at rest asked for the stall remedy now
   int failures_at_stall_ = 0;             // consecutive_failures_ when the failures last forced it
   double rest_retry_after_s_ = -INFINITY; // a failed plan at rest is tried again from then
+  double moving_retry_after_s_ = -INFINITY;  // a failed periodic replan of a safe trajectory: from then
   double stall_gain_s_ = 0.0;             // progress_.lastGain() when stalls_ was last reset
   bool backoff_when_stopped_ = false;     // a stall remedy: back off once the stop it began has ended
   double progress_tick_s_ = NAN;          // the last tick that measured progress (or paused it) [s]
