@@ -15,7 +15,8 @@
 # port (scripts/bench_faults.py talks to the flight through it), --realtime-factor the sim-time pace.
 # rviz opens when $DISPLAY is set (unless --rviz false). The launch gets its own ROS master on a free
 # port, so flights never talk to another roscore on the machine. --timeout (default: goals x
-# goal timeout + 180 s) is a wall-clock guard against a hung simulation only; the monitor's per-goal
+# goal timeout + 180 s, times $TOPO_PLANNER_TIME_LIMIT_SCALE) is a wall-clock guard against a hung
+# simulation only; the monitor's per-goal
 # limit decides a failed goal. The other nodes log to ~/.ros/log unless --verbose.
 set -euo pipefail
 
@@ -95,7 +96,9 @@ if [ -n "$goals" ]; then
   n_goals=$((n / 3))
 fi
 if [ -z "$timeout_s" ]; then
-  timeout_s=$(awk -v n="$n_goals" -v g="$goal_timeout" 'BEGIN { printf "%d", n * g + 180 }')
+  # Stretched like the rostests' hang guards on a slow machine (TOPO_PLANNER_TIME_LIMIT_SCALE).
+  timeout_s=$(awk -v n="$n_goals" -v g="$goal_timeout" -v k="${TOPO_PLANNER_TIME_LIMIT_SCALE:-1}" \
+    'BEGIN { printf "%d", (n * g + 180) * k }')
 fi
 
 args=(density:="$density" map_style:="$map_style" seed:="$seed" rviz:="$rviz" sim_time:="$sim_time" monitor:=true

@@ -123,7 +123,9 @@ std::unique_ptr<DepthCameraServer> DepthCameraServer::create(const ros::NodeHand
   std::unique_ptr<DepthCameraServer> s(new DepthCameraServer(nh, config));
   s->image_pub_ = s->nh_.advertise<sensor_msgs::Image>("camera/depth/image_rect_raw", 2);
   s->info_pub_ = s->nh_.advertise<sensor_msgs::CameraInfo>("camera/depth/camera_info", 2);
-  s->pose_pub_ = s->nh_.advertise<geometry_msgs::PoseStamped>("camera/pose", 2);
+  // Poses are small and a consumer pairs them with the images by stamp: a deeper queue than the
+  // images' (a slow link drops the oldest; under ThreadSanitizer the pose of a delivered image was).
+  s->pose_pub_ = s->nh_.advertise<geometry_msgs::PoseStamped>("camera/pose", 20);
   s->odom_sub_ =
       s->nh_.subscribe("odom", 1, &DepthCameraServer::odomCallback, s.get(), ros::TransportHints().tcpNoDelay());
   s->blackout_sub_ = s->nh_.subscribe("quadrotor_sim/depth_blackout", 10, &DepthCameraServer::blackoutCallback, s.get());
