@@ -98,7 +98,7 @@ fi
 if [ -z "$timeout_s" ]; then
   # Stretched like the rostests' hang guards on a slow machine (TOPO_PLANNER_TIME_LIMIT_SCALE).
   timeout_s=$(awk -v n="$n_goals" -v g="$goal_timeout" -v k="${TOPO_PLANNER_TIME_LIMIT_SCALE:-1}" \
-    'BEGIN { printf "%d", (n * g + 180) * k }')
+    'BEGIN { if (!(k + 0 >= 1)) k = 1; printf "%d", (n * g + 180) * k }')
 fi
 
 args=(density:="$density" map_style:="$map_style" seed:="$seed" rviz:="$rviz" sim_time:="$sim_time" monitor:=true

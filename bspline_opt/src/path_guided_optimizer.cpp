@@ -318,18 +318,17 @@ void PathGuidedOptimizer::finish(const EsdfMap& map, OptimizationResult* result)
   result->status = OptimizationStatus::kSuccess;
   result->message.clear();
 
-  // Feasibility first (it does not move the path): stretch time when allowed. The limits, or the
-  // end states' own bounds where those exceed them: a curve that starts in a state beyond a limit
-  // (the hard braking it is planned from) can never meet it; it may keep that state, not exceed it.
+  // Feasibility first (it does not move the path): stretch time when allowed. The derivative control
+  // points the start state alone fixes are exempt: that state is the vehicle's already (hard
+  // braking, or a velocity point a0 dt / 2 past the limit), no knot span helps it, and stretching
+  // would change it. Every other one, up to the end state, is held to the limits.
   const double duration_before = spline.duration();
-  const double vel_limit = std::max(config_.max_vel_mps, spline.boundaryVelocity());
-  const double acc_limit = std::max(config_.max_acc_mps2, spline.boundaryAcceleration());
-  if (config_.reallocate_time) spline.reallocateTime(vel_limit, acc_limit);
+  if (config_.reallocate_time) spline.reallocateTime(config_.max_vel_mps, config_.max_acc_mps2, true);
   stats.time_ratio = spline.duration() / duration_before;
-  stats.max_vel_mps = spline.maxVelocity();
-  stats.max_acc_mps2 = spline.maxAcceleration();
-  const bool feasible = stats.max_vel_mps <= vel_limit * (1.0 + 1e-9) &&
-                        stats.max_acc_mps2 <= acc_limit * (1.0 + 1e-9) &&
+  stats.max_vel_mps = spline.maxVelocityPastStart();
+  stats.max_acc_mps2 = spline.maxAccelerationPastStart();
+  const bool feasible = stats.max_vel_mps <= config_.max_vel_mps * (1.0 + 1e-9) &&
+                        stats.max_acc_mps2 <= config_.max_acc_mps2 * (1.0 + 1e-9) &&
                         stats.time_ratio <= config_.max_time_ratio;
 
   // Collision check on the curve: time steps short enough that consecutive samples are at most

@@ -107,7 +107,7 @@ double UniformBspline::jerkIntegral() const {
   return integral;
 }
 
-double UniformBspline::maxDifferenceNorm(int order, bool ends) const {
+double UniformBspline::maxDifferenceNorm(int order, bool past_start) const {
   const int n = numControlPoints();
   if (n <= order) return 0.0;
   // Binomial coefficients with alternating signs: the order-th forward difference.
@@ -119,8 +119,8 @@ double UniformBspline::maxDifferenceNorm(int order, bool ends) const {
   }
   double best_sq = 0.0;
   for (int i = 0; i + order < n; ++i) {
-    // Difference i reads control points i..i + order: within the first degree_, or the last.
-    if (ends && i + order >= degree_ && i < n - degree_) continue;
+    // Difference i reads control points i..i + order: all among the first degree_ ones?
+    if (past_start && i + order < degree_) continue;
     Eigen::Vector3d d = Eigen::Vector3d::Zero();
     for (int j = 0; j <= order; ++j) d += coeff[j] * control_points_.row(i + order - j).transpose();
     best_sq = std::max(best_sq, d.squaredNorm());
@@ -132,19 +132,20 @@ double UniformBspline::maxVelocity() const { return degree_ >= 1 ? maxDifference
 
 double UniformBspline::maxAcceleration() const { return degree_ >= 2 ? maxDifferenceNorm(2) : 0.0; }
 
-double UniformBspline::boundaryVelocity() const { return degree_ >= 1 ? maxDifferenceNorm(1, true) : 0.0; }
+double UniformBspline::maxVelocityPastStart() const { return degree_ >= 1 ? maxDifferenceNorm(1, true) : 0.0; }
 
-double UniformBspline::boundaryAcceleration() const { return degree_ >= 2 ? maxDifferenceNorm(2, true) : 0.0; }
+double UniformBspline::maxAccelerationPastStart() const { return degree_ >= 2 ? maxDifferenceNorm(2, true) : 0.0; }
 
-double UniformBspline::reallocateTime(double max_vel_mps, double max_acc_mps2) {
+double UniformBspline::reallocateTime(double max_vel_mps, double max_acc_mps2, bool exempt_start) {
   assert(isValid() && max_vel_mps > 0.0 && max_acc_mps2 > 0.0);
-  const double vel = maxVelocity(), acc = maxAcceleration();
-  double ratio = std::max({1.0, vel / max_vel_mps, std::sqrt(acc / max_acc_mps2)});
+  const auto vel = [&] { return maxDifferenceNorm(1, exempt_start); };
+  const auto acc = [&] { return degree_ >= 2 ? maxDifferenceNorm(2, exempt_start) : 0.0; };
+  double ratio = std::max({1.0, vel() / max_vel_mps, std::sqrt(acc() / max_acc_mps2)});
   if (ratio <= 1.0) return 1.0;
   const double dt0 = knot_span_s_;
   knot_span_s_ = dt0 * ratio;
   // The closed-form ratio can miss the limit by an ulp; lengthen by a hair until it does not.
-  while (maxVelocity() > max_vel_mps || maxAcceleration() > max_acc_mps2) {
+  while (vel() > max_vel_mps || acc() > max_acc_mps2) {
     ratio *= 1.0 + 1e-12;
     knot_span_s_ = dt0 * ratio;
   }

@@ -258,26 +258,29 @@ TEST(UniformBspline, EaseIntoStretchKeepsTheStartPaceAndThePath) {
   EXPECT_EQ(untouched.controlPoints(), eased.controlPoints());
 }
 
-// The end states' bounds: the difference control points computed from the first and the last
-// degree() control points only.
-TEST(UniformBspline, BoundaryBoundsReadTheEndControlPointsOnly) {
+// The bounds past the start leave out the difference control points computed from the first
+// degree() control points alone (for a cubic: V0, V1 and A0, fixed by the start state).
+TEST(UniformBspline, BoundsPastTheStartLeaveOutTheStartsControlPoints) {
   for (uint32_t seed = 0; seed < 5; ++seed) {
     const UniformBspline s(randomControlPoints(12, 300 + seed, 2.0), 3, 0.2);
     const Eigen::MatrixX3d& q = s.controlPoints();
     const int n = int(q.rows());
     double vel = 0.0, acc = 0.0;
-    for (const int i : {0, 1, n - 3, n - 2}) vel = std::max(vel, (q.row(i + 1) - q.row(i)).norm() / 0.2);
-    for (const int i : {0, n - 3}) acc = std::max(acc, (q.row(i + 2) - 2.0 * q.row(i + 1) + q.row(i)).norm() / 0.04);
-    EXPECT_NEAR(s.boundaryVelocity(), vel, 1e-9);
-    EXPECT_NEAR(s.boundaryAcceleration(), acc, 1e-9);
-    EXPECT_LE(s.boundaryVelocity(), s.maxVelocity());
-    EXPECT_LE(s.boundaryAcceleration(), s.maxAcceleration());
+    for (int i = 2; i + 1 < n; ++i) vel = std::max(vel, (q.row(i + 1) - q.row(i)).norm() / 0.2);
+    for (int i = 1; i + 2 < n; ++i) acc = std::max(acc, (q.row(i + 2) - 2.0 * q.row(i + 1) + q.row(i)).norm() / 0.04);
+    EXPECT_NEAR(s.maxVelocityPastStart(), vel, 1e-9);
+    EXPECT_NEAR(s.maxAccelerationPastStart(), acc, 1e-9);
+    EXPECT_LE(s.maxVelocityPastStart(), s.maxVelocity());
+    EXPECT_LE(s.maxAccelerationPastStart(), s.maxAcceleration());
   }
-  // Fixed by the end states: a fit with a given start velocity and acceleration has them as bounds.
-  const UniformBspline line = UniformBspline::straightLine({0, 0, 0}, {5, 0, 0}, 12, 3, 0.3);  // rest to rest
-  EXPECT_NEAR(line.boundaryVelocity(), 0.0, 1e-12);
-  EXPECT_NEAR(line.boundaryAcceleration(), 0.0, 1e-12);
-  EXPECT_GT(line.maxVelocity(), 1.0);
+  // A start far faster than the rest: only the exempt reallocation leaves the knot span alone.
+  Eigen::MatrixX3d q = Eigen::MatrixX3d::Zero(10, 3);
+  for (int i = 0; i < 10; ++i) q(i, 0) = i < 2 ? 0.5 * i : 0.5 + 0.1 * (i - 1);  // V0 = 5 m/s, then 1 m/s
+  UniformBspline fast_start(q, 3, 0.1);
+  EXPECT_NEAR(fast_start.maxVelocity(), 5.0, 1e-9);
+  EXPECT_NEAR(fast_start.maxVelocityPastStart(), 1.0, 1e-9);
+  EXPECT_EQ(fast_start.reallocateTime(3.0, 100.0, true), 1.0);
+  EXPECT_GT(fast_start.reallocateTime(3.0, 100.0), 1.6);
 }
 
 TEST(UniformBspline, Validity) {

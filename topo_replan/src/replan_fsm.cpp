@@ -541,6 +541,8 @@ void ReplanFsm::observeClockLocked(double now, FsmOutput* out) {
   last_progress_s_ += shift;  // read from this clock
   progress_.shift(shift);
   progress_tick_s_ += shift;
+  rest_retry_after_s_ += shift;    // the paced retries keep their pace
+  moving_retry_after_s_ += shift;
   last_clock_s_ = now;
   ++time_jumps_;
   time_jumped_ = true;

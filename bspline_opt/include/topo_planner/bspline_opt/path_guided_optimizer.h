@@ -15,9 +15,9 @@
 //  * Final check: the curve is sampled at most a check step apart in arc length (half a voxel by
 //    default; the time step is the step over the speed bound) on the true ESDF (trilinear
 //    EsdfMap::query) against clearance_m, and the limits are checked on the derivative control
-//    points (convex hull bound, so they hold along the whole curve). Where the boundary states alone
-//    exceed a limit (a plan started from hard braking), the limit is raised to what they reach
-//    (UniformBspline::boundaryAcceleration): such a curve can keep that state, not go beyond it.
+//    points (convex hull bound, so they hold along the whole curve), all but those the start state
+//    alone fixes (UniformBspline::maxAccelerationPastStart): a curve planned from hard braking keeps
+//    that state at its start, and is held to the limits from there on.
 //
 // GTO is phase 2 alone from the initial spline, then the same reallocation and check; the restart
 // variant runs it from the initial spline and from n - 1 perturbed copies (seeded), keeping the best.
@@ -64,8 +64,8 @@ struct OptimizationStats {
   double min_clearance_m = 0.0;  ///< smallest ESDF distance over the curve samples [m]
   double min_clearance_t_s = 0.0;  ///< curve time of that sample [s]
   int check_samples = 0;        ///< curve samples of the final check
-  double max_vel_mps = 0.0;     ///< bound from the velocity control points of the result
-  double max_acc_mps2 = 0.0;    ///< bound from the acceleration control points of the result
+  double max_vel_mps = 0.0;     ///< bound from the velocity control points of the result past its start
+  double max_acc_mps2 = 0.0;    ///< ... and from its acceleration control points (maxAccelerationPastStart)
 };
 
 struct OptimizationResult {

@@ -65,18 +65,20 @@ class UniformBspline {
   /// max_i ||A_i|| over the acceleration control points: an upper bound of ||a(t)|| [m/s^2].
   double maxAcceleration() const;
 
-  /// The same bounds over the control points the two end states fix (the first and the last
-  /// degree() control points, i.e. position, velocity and acceleration at t = 0 and at the end):
-  /// what any spline with these end states and this knot span reaches [m/s], [m/s^2].
-  double boundaryVelocity() const;
-  double boundaryAcceleration() const;
+  /// The same bounds without the derivative control points that depend on the first degree()
+  /// control points alone (for a cubic: those the start's position, velocity and acceleration fix):
+  /// what a curve planned from a given start state can be held to [m/s], [m/s^2].
+  double maxVelocityPastStart() const;
+  double maxAccelerationPastStart() const;
 
   /// Time reallocation: when maxVelocity() > max_vel_mps or maxAcceleration() > max_acc_mps2,
   /// lengthens the knot span by the smallest ratio r that brings both within the limits
   /// (velocity scales by 1/r, acceleration by 1/r^2) and returns r; returns 1 and changes nothing
   /// otherwise. The control points, hence the path, are unchanged; boundary velocities and
   /// accelerations scale with the rest. Preconditions: isValid(), positive limits.
-  double reallocateTime(double max_vel_mps, double max_acc_mps2);
+  /// With exempt_start, the limits apply to the *PastStart() bounds only (the start state's own
+  /// control points may exceed them: they scale with the rest).
+  double reallocateTime(double max_vel_mps, double max_acc_mps2, bool exempt_start = false);
 
   /// Undoes a time reallocation at the start only: this spline was lengthened by `ratio` (e.g. by
   /// reallocateTime()); the result follows the same path, but its clock runs `ratio` times faster
@@ -110,8 +112,8 @@ class UniformBspline {
 
  private:
   // Largest norm among the rows of the n-th difference of the control points, divided by dt^n;
-  // with `ends`, only among those computed from the first or the last degree() control points.
-  double maxDifferenceNorm(int order, bool ends = false) const;
+  // with past_start, leaving out those computed from the first degree() control points alone.
+  double maxDifferenceNorm(int order, bool past_start = false) const;
 
   Eigen::MatrixX3d control_points_;
   int degree_ = 3;
