@@ -122,12 +122,12 @@ define sanitized_tests
 endef
 SAN_LOG = log_path=$(ROOT)/build/$(1)/sanitizer_logs/$(2):log_exe_name=1
 test-asan: deps
-	$(call sanitized_tests,ws_asan,address$(COMMA)undefined,TOPO_PLANNER_TIME_LIMIT_SCALE=$(ASAN_SCALE) \
+	$(call sanitized_tests,ws_asan,address$(COMMA)undefined,TOPO_PLANNER_TIME_LIMIT_SCALE=$(ASAN_SCALE) TOPO_PLANNER_BUDGET_SCALE=$(ASAN_SCALE) \
 	  ASAN_OPTIONS=detect_leaks=1:$(call SAN_LOG,ws_asan,asan) LSAN_OPTIONS=suppressions=$(ROOT)/scripts/lsan.supp \
 	  UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1:$(call SAN_LOG,ws_asan,ubsan))
 
 test-tsan: deps
-	$(call sanitized_tests,ws_tsan,thread,TOPO_PLANNER_TIME_LIMIT_SCALE=$(TSAN_SCALE) \
+	$(call sanitized_tests,ws_tsan,thread,TOPO_PLANNER_TIME_LIMIT_SCALE=$(TSAN_SCALE) TOPO_PLANNER_BUDGET_SCALE=$(TSAN_SCALE) \
 	  TSAN_OPTIONS="halt_on_error=1 suppressions=$(ROOT)/scripts/tsan.supp $(subst :, ,$(call SAN_LOG,ws_tsan,tsan))")
 
 test-sanitizers: deps

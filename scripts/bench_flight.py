@@ -292,8 +292,8 @@ def main(argv):
     ap.add_argument('--default-goals', action='store_true', help="the scenario's three default goals instead")
     ap.add_argument('--goal-timeout', type=float, default=90.0)
     ap.add_argument('--sim-time', action='store_true',
-                    help='run the simulations on simulated time (lockstep waits 4 x longer unless '
-                         'TOPO_PLANNER_TIME_LIMIT_SCALE is set)')
+                    help='run the simulations on simulated time (TOPO_PLANNER_TIME_LIMIT_SCALE stretches '
+                         'the lockstep waits on a loaded machine)')
     ap.add_argument('--no-plot', action='store_true', help='no PNG per flight')
     ap.add_argument('--suite', default='worlds', choices=['worlds', 'forests'])
     ap.add_argument('--styles', default='forest-medium,forest-high,windows,rings,boxes,mixed',
@@ -303,12 +303,6 @@ def main(argv):
                     help='worlds suite: reuse the reports of flights already in OUT (an interrupted run)')
     args = ap.parse_args(argv[1:])
     args.ws = os.environ.get('WS', os.path.join(ROOT, 'build', 'ws'))
-    if args.sim_time and 'TOPO_PLANNER_TIME_LIMIT_SCALE' not in os.environ:
-        # In simulated time the simulator waits for the controller's answer and the mapping's fusion
-        # up to its wall timeouts, then runs on without them (a hang guard): on a loaded machine that
-        # flies the vehicle on stale rotor commands. Four times longer waits keep the lockstep; a
-        # loaded machine slows the flight instead (simulator.launch reads the variable).
-        os.environ['TOPO_PLANNER_TIME_LIMIT_SCALE'] = '4'
     if args.default_goals:
         args.goals = 3
     if args.suite == 'worlds':

@@ -1,5 +1,7 @@
 #include "topo_planner/plan_manage/planner_server.h"
 
+#include <std_msgs/Header.h>
+
 #include <visualization_msgs/MarkerArray.h>
 
 #include <algorithm>
@@ -30,6 +32,7 @@ std::unique_ptr<PlannerServer> PlannerServer::create(const ros::NodeHandle& nh, 
   std::random_device entropy;
   s.session_ = (uint64_t(entropy()) << 32) ^ uint64_t(entropy()) ^ uint64_t(ros::WallTime::now().toNSec());
   s.heartbeat_pub_ = pnh.advertise<PlannerHeartbeat>("heartbeat", 10);
+  s.tick_done_pub_ = pnh.advertise<std_msgs::Header>("tick_done", 10);
   s.bspline_pub_ = pnh.advertise<Bspline>("bspline", 10);
   s.event_pub_ = pnh.advertise<ReplanEvent>("replan_event", 100);
   s.reference_pub_ = pnh.advertise<nav_msgs::Path>("reference_path", 1, true);
@@ -214,6 +217,11 @@ void PlannerServer::planTimer(const ros::TimerEvent&) {
     out = fsm_->tick(now, esdf, [] { return ros::Time::now().toSec(); });
   });
   handle(out);
+  // The tick of `now` is done (its plan published): the simulator's planner lockstep holds its
+  // clock within a lag of this, so a slow plan does not come late in simulated time.
+  std_msgs::Header done;
+  done.stamp = ros::Time(now);
+  tick_done_pub_.publish(done);
 }
 
 void PlannerServer::safetyTimer(const ros::TimerEvent&) {
@@ -543,6 +551,17 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("optimizer/max_iterations", p.optimizer.max_iterations);
   r.read("optimizer/max_time_s", p.optimizer.max_time_s);
   r.read("optimizer/lambda_collision", p.optimizer.l2c);
+  // The planning's wall-clock budgets (the roadmap's sampling time, NLopt's time per run) stretch on
+  // a slow machine (sanitizers: the Makefile sets it with TOPO_PLANNER_BUDGET_SCALE); the counts
+  // (samples, evaluations) stay as they are. 1 in flight.
+  double budget_scale = 1.0;
+  r.read("time_budget_scale", budget_scale);
+  if (!(budget_scale >= 1.0 && budget_scale <= 100.0)) {
+    r.errors() << "time_budget_scale must be in [1, 100]; ";
+  } else {
+    p.search.roadmap.max_time_s *= budget_scale;
+    p.optimizer.max_time_s *= budget_scale;
+  }
   p.astar.clearance_m = p.search.clearance_m;
   // The route keeps the guide search's clearance and its view of unknown space unless told otherwise.
   f.route.clearance_m = p.search.clearance_m;

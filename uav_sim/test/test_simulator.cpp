@@ -358,16 +358,14 @@ TEST_F(Simulator, FlyingIntoAnObstacleIsACollision) {
   stream(here);
 }
 
-// The perception lockstep (simulator.test: perception_topic /test/depth_fused; this node plays the
-// mapping). A first frame fused arms it: the clock stops perception_max_lag_s (0.2 s) past it (or at
-// once, if the frame arrived later than that). Held there, a frame fused 0.1 s before the held time
-// lets the clock run exactly 0.1 s on (and one odometry batch, 5 ms), where it waits again; with no
-// frame for perception_timeout_s of wall time it runs on (a dead planner does not stop the clock).
-// Last: the other cases run unheld.
-TEST_F(Simulator, TheClockWaitsForTheMappingToFuseDepth) {
-  if (!ros::Time::isSimTime()) GTEST_SKIP() << "the perception lockstep runs in sim time only";
-  ros::Publisher fused = nh_->advertise<std_msgs::Header>("/test/depth_fused", 10);
-  ASSERT_TRUE(waitFor([&] { return fused.getNumSubscribers() > 0; }, 10.0)) << "the simulator does not listen";
+// A lockstep on reports of caught-up time (simulator.test sets the topics; this node plays the
+// mapping or the planner). A first report arms it: the clock stops `lag` past it (or at once, if the
+// report arrived later than that). Held there, a report lag - 0.1 s before the held time lets the clock
+// run exactly 0.1 s on (and one odometry batch, 5 ms), where it waits again; with no report for
+// perception_timeout_s of wall time it runs on (a dead planner does not stop the clock).
+void expectClockHeldBy(ros::NodeHandle* nh, const std::string& topic, double lag) {
+  ros::Publisher reports = nh->advertise<std_msgs::Header>(topic, 10);
+  ASSERT_TRUE(waitFor([&] { return reports.getNumSubscribers() > 0; }, 10.0)) << "the simulator does not listen";
   // The clock when it has not moved for 0.3 s of wall time (NaN while it moves).
   auto heldClock = [] {
     const double a = ros::Time::now().toSec();
@@ -375,22 +373,36 @@ TEST_F(Simulator, TheClockWaitsForTheMappingToFuseDepth) {
     const double b = ros::Time::now().toSec();
     return a == b ? b : NAN;
   };
-  std_msgs::Header frame;
-  frame.stamp = ros::Time::now();
-  fused.publish(frame);
-  const double t0 = frame.stamp.toSec(), lag = 0.2;
+  std_msgs::Header report;
+  report.stamp = ros::Time::now();
+  reports.publish(report);
+  const double t0 = report.stamp.toSec();
   double held = NAN;
   ASSERT_TRUE(waitFor([&] { return !std::isnan(held = heldClock()); }, 10.0)) << "the clock never stopped";
   EXPECT_GE(held, t0 + lag - 1e-6);
-  // Held: a frame fused 0.1 s before the held time releases 0.1 s.
-  frame.stamp = ros::Time(held - 0.1);
-  fused.publish(frame);
+  // Held: a report `lag` - 0.1 s before the held time releases 0.1 s.
+  report.stamp = ros::Time(held - lag + 0.1);
+  reports.publish(report);
   double again = NAN;
   ASSERT_TRUE(waitFor([&] { return !std::isnan(again = heldClock()) && again > held; }, 10.0)) << "not released";
   EXPECT_GE(again, held + 0.1 - 1e-6);
   EXPECT_LE(again, held + 0.1 + 0.0051);
-  // No frame any more: on after the timeout (2 s of wall time).
+  // No report any more: on after the timeout (2 s of wall time).
   ASSERT_TRUE(waitFor([&] { return ros::Time::now().toSec() > again + 1.0; }, 30.0)) << "held for good";
+}
+
+// The perception lockstep: the mapping's frames fused (perception_topic /test/depth_fused,
+// perception_max_lag_s 0.2 s). After the other cases, which run unheld.
+TEST_F(Simulator, TheClockWaitsForTheMappingToFuseDepth) {
+  if (!ros::Time::isSimTime()) GTEST_SKIP() << "the perception lockstep runs in sim time only";
+  expectClockHeldBy(nh_, "/test/depth_fused", 0.2);
+}
+
+// The planner lockstep: the planner's ticks finished (planner_topic /test/planner_tick,
+// planner_max_lag_s 0.1 s). The perception lockstep timed out above and stays suspended.
+TEST_F(Simulator, TheClockWaitsForThePlannersTicks) {
+  if (!ros::Time::isSimTime()) GTEST_SKIP() << "the planner lockstep runs in sim time only";
+  expectClockHeldBy(nh_, "/test/planner_tick", 0.1);
 }
 
 }  // namespace

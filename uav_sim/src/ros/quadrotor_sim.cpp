@@ -73,6 +73,8 @@ bool QuadrotorSim::Config::validate(std::string* why) const {
     err << "perception_max_lag_s must be in (0, 10]; ";
   if (!(finitePositive(perception_timeout_s) && perception_timeout_s <= 60.0))
     err << "perception_timeout_s must be in (0, 60]; ";
+  if (!(finitePositive(planner_max_lag_s) && planner_max_lag_s <= 10.0))
+    err << "planner_max_lag_s must be in (0, 10]; ";
   if (!(finitePositive(command_timeout_s) && command_timeout_s <= 3600.0))
     err << "command_timeout_s must be in (0, 3600]; ";
   if (!(finitePositive(collision_radius_m) && collision_radius_m <= 10.0))
@@ -119,6 +121,8 @@ bool readQuadrotorSimParams(const ros::NodeHandle& pnh, QuadrotorSim::Config* co
   r.read("perception_topic", c.perception_topic);
   r.read("perception_max_lag_s", c.perception_max_lag_s);
   r.read("perception_timeout_s", c.perception_timeout_s);
+  r.read("planner_topic", c.planner_topic);
+  r.read("planner_max_lag_s", c.planner_max_lag_s);
   // The wall-clock waits of both locksteps stretch by this (make test-asan / test-tsan: every node
   // runs several times slower; the simulated flight is the same).
   double wall_timeout_scale = 1.0;
@@ -220,9 +224,16 @@ std::unique_ptr<QuadrotorSim> QuadrotorSim::create(const ros::NodeHandle& nh, co
   s.command_sub_ = command_nh.subscribe("controller/rotor_command", 10, &QuadrotorSim::commandCallback, &s,
                                         ros::TransportHints().tcpNoDelay());
   // The mapping's frames fused, on the same queue (the loop may be waiting for them: perception lockstep).
+  // And the planner's ticks (planner lockstep).
+  auto subscribeReports = [&](const std::string& topic, Source source) {
+    return command_nh.subscribe<std_msgs::Header>(
+        topic, 10, [&s, source](const std_msgs::HeaderConstPtr& msg) { s.reportCallback(source, msg); },
+        ros::VoidConstPtr(), ros::TransportHints().tcpNoDelay());
+  };
   if (config.publish_clock && config.lockstep && !config.perception_topic.empty())
-    s.fused_sub_ = command_nh.subscribe(config.perception_topic, 10, &QuadrotorSim::fusedCallback, &s,
-                                        ros::TransportHints().tcpNoDelay());
+    s.fused_sub_ = subscribeReports(config.perception_topic, kMapping);
+  if (config.publish_clock && config.lockstep && !config.planner_topic.empty())
+    s.planner_sub_ = subscribeReports(config.planner_topic, kPlanner);
   s.command_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &s.command_queue_);
   s.command_spinner_->start();
   ROS_INFO("quadrotor_sim: start (%.2f %.2f %.2f) hovering, %.0f Hz odometry, %s, collision radius %.2f m",
@@ -366,7 +377,7 @@ void QuadrotorSim::loop() {
     }
     const ros::Time published = publishOdometry();
     if (config_.publish_clock && config_.lockstep && !published.isZero()) waitForReply(published);
-    if (fused_sub_) waitForPerception(stampOf(step_));
+    if (fused_sub_ || planner_sub_) waitForPerception(stampOf(step_));
 
     const auto wall = SteadyClock::now();
     const double period = std::chrono::duration<double>(wall - status_wall).count();
@@ -595,41 +606,45 @@ void QuadrotorSim::waitForReply(const ros::Time& odom_stamp) {
                     odom_stamp.toSec(), 1e3 * config_.lockstep_timeout_s);
 }
 
-void QuadrotorSim::fusedCallback(const std_msgs::HeaderConstPtr& msg) {
+void QuadrotorSim::reportCallback(Source source, const std_msgs::HeaderConstPtr& msg) {
   if (msg->stamp.isZero()) return;
   {
     std::lock_guard<std::mutex> lock(perception_mutex_);
-    // The latest, not the largest: after a backward clock step the frames are stamped earlier.
-    fused_stamp_ = msg->stamp;
-    perception_suspended_ = false;
+    // The latest, not the largest: after a backward clock step the reports are stamped earlier.
+    reported_[source] = msg->stamp;
+    suspended_[source] = false;
   }
   perception_cv_.notify_all();
 }
 
 void QuadrotorSim::waitForPerception(const ros::Time& clock) {
-  std::unique_lock<std::mutex> lock(perception_mutex_);
-  // Not before the first frame, nor while the camera is blacked out (no frame will come).
-  if (fused_stamp_.isZero() || perception_suspended_ || depth_blackout_) return;
-  const ros::Time due = clock - ros::Duration(config_.perception_max_lag_s);
-  if (fused_stamp_ >= due) return;
-  {
-    std::lock_guard<std::mutex> stats_lock(stats_mutex_);
-    ++stats_.perception_waits;
+  for (const Source source : {kMapping, kPlanner}) {
+    std::unique_lock<std::mutex> lock(perception_mutex_);
+    // Not before the first report, nor while the camera is blacked out (no frame will come).
+    if (reported_[source].isZero() || suspended_[source] || (source == kMapping && depth_blackout_)) continue;
+    const double lag = source == kMapping ? config_.perception_max_lag_s : config_.planner_max_lag_s;
+    const ros::Time due = clock - ros::Duration(lag);
+    if (reported_[source] >= due) continue;
+    {
+      std::lock_guard<std::mutex> stats_lock(stats_mutex_);
+      ++(source == kMapping ? stats_.perception_waits : stats_.planner_waits);
+    }
+    const bool caught_up = perception_cv_.wait_for(lock, std::chrono::duration<double>(config_.perception_timeout_s),
+                                                   [&] { return stop_ || reported_[source] >= due; });
+    if (caught_up) continue;
+    suspended_[source] = true;  // until its next report
+    const double last = reported_[source].toSec();
+    lock.unlock();
+    {
+      std::lock_guard<std::mutex> stats_lock(stats_mutex_);
+      ++(source == kMapping ? stats_.perception_timeouts : stats_.planner_timeouts);
+    }
+    ROS_WARN_THROTTLE(5.0,
+                      "quadrotor_sim: no %s after %.3f within %.1f s (wall; the last one %.3f): running on without "
+                      "waiting until the next one",
+                      source == kMapping ? "depth frame fused" : "planning tick finished", due.toSec(),
+                      config_.perception_timeout_s, last);
   }
-  const bool fused = perception_cv_.wait_for(lock, std::chrono::duration<double>(config_.perception_timeout_s),
-                                             [&] { return stop_ || fused_stamp_ >= due; });
-  if (fused) return;
-  perception_suspended_ = true;  // until the next frame fused
-  const double last = fused_stamp_.toSec();
-  lock.unlock();
-  {
-    std::lock_guard<std::mutex> stats_lock(stats_mutex_);
-    ++stats_.perception_timeouts;
-  }
-  ROS_WARN_THROTTLE(5.0,
-                    "quadrotor_sim: no depth frame fused after %.3f within %.1f s (wall; the last one %.3f): running "
-                    "on without waiting until the next one",
-                    due.toSec(), config_.perception_timeout_s, last);
 }
 
 void QuadrotorSim::logStatus(double wall_s, uint64_t steps_in_period) {
@@ -639,12 +654,14 @@ void QuadrotorSim::logStatus(double wall_s, uint64_t steps_in_period) {
   ROS_INFO(
       "quadrotor_sim: t %.1f s, real-time factor %.2f (asked %.2f), at (%.2f %.2f %.2f) %.2f m/s, "
       "%u collisions, %lu commands (%lu refused), %lu lockstep timeouts, %lu failsafes, %lu backlogs dropped, "
-      "%lu fault changes, %lu odometry messages dropped, %lu waits for the mapping (%lu in vain)",
+      "%lu fault changes, %lu odometry messages dropped, %lu waits for the mapping (%lu in vain), %lu for the "
+      "planner (%lu in vain)",
       stampOf(step_).toSec(), factor, config_.publish_clock ? config_.realtime_factor : 1.0, q.position.x(),
       q.position.y(), q.position.z(), q.velocity.norm(), s.collisions, (unsigned long)s.commands,
       (unsigned long)s.bad_commands, (unsigned long)s.lockstep_timeouts, (unsigned long)s.failsafe_events,
       (unsigned long)s.lag_events, (unsigned long)s.fault_events, (unsigned long)s.odom_dropped,
-      (unsigned long)s.perception_waits, (unsigned long)s.perception_timeouts);
+      (unsigned long)s.perception_waits, (unsigned long)s.perception_timeouts, (unsigned long)s.planner_waits,
+      (unsigned long)s.planner_timeouts);
   if (config_.publish_clock && factor < 0.8 * config_.realtime_factor)
     ROS_WARN(
         "quadrotor_sim: the simulation runs at %.2f x real time, below the %.2f asked (loaded machine or a slow "

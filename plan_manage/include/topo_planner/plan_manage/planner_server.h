@@ -110,6 +110,7 @@ class PlannerServer {
   ros::Subscriber odom_sub_, goal_sub_, waypoints_sub_, position_cmd_sub_;
   uint64_t session_ = 0;  // random per process: trajectory ordering survives a restart
   ros::Publisher heartbeat_pub_;
+  ros::Publisher tick_done_pub_;  // ~tick_done: each planning tick finished, stamped with its time
   int time_jumps_logged_ = 0;  // safety thread only
   ros::Publisher route_pub_;
   ros::Publisher bspline_pub_, event_pub_, reference_pub_, traj_vis_pub_, candidates_vis_pub_, guides_vis_pub_,

@@ -50,6 +50,11 @@
 // while a depth blackout fault runs; a timeout suspends it until the next frame arrives (a dead
 // planner or camera does not slow the clock to a crawl).
 //
+// Planner lockstep (the same, `planner_topic` set: simulation.launch sets the planner's ~tick_done).
+// The planner announces every planning tick it finished (std_msgs/Header, the tick's time); the
+// clock leads the last one by at most planner_max_lag_s (two ticks), so a plan that takes long in
+// wall time (a sanitizer's slowdown) does not come late in simulated time. Same timeout and suspension.
+//
 // Commands. Before the first command the rotors hold hover speed (the vehicle hangs still at the
 // start). A command is held (zero-order hold) until the next one; when none arrives for
 // command_timeout_s of simulated time, the failsafe takes over: `hold` (default) emulates a flight
@@ -142,7 +147,9 @@ class QuadrotorSim {
     double lockstep_timeout_s = 0.05;     ///< longest wait for that answer (wall) [s]
     std::string perception_topic;         ///< depth frames fused (std_msgs/Header); empty: no perception lockstep
     double perception_max_lag_s = 0.2;    ///< the clock leads the last frame fused by at most this [s]
-    double perception_timeout_s = 2.0;    ///< longest wait for the next frame fused (wall) [s]
+    double perception_timeout_s = 2.0;    ///< longest wait for the next frame fused or planning tick (wall) [s]
+    std::string planner_topic;            ///< planning ticks finished (std_msgs/Header); empty: no planner lockstep
+    double planner_max_lag_s = 0.1;       ///< the clock leads the last planning tick by at most this [s]
     double command_timeout_s = 0.1;       ///< simulated time without commands before the failsafe [s]
     Failsafe failsafe = Failsafe::kHold;  ///< what the vehicle does then
     double collision_radius_m = 0.15;     ///< body sphere radius [m]
@@ -178,6 +185,8 @@ class QuadrotorSim {
     uint64_t lockstep_timeouts = 0;
     uint64_t perception_waits = 0;     ///< times the clock waited for the mapping
     uint64_t perception_timeouts = 0;  ///< ... in vain
+    uint64_t planner_waits = 0;        ///< times the clock waited for the planner
+    uint64_t planner_timeouts = 0;     ///< ... in vain
     uint64_t failsafe_events = 0;
     uint64_t lag_events = 0;  ///< backlogs dropped
     uint64_t fault_events = 0;      ///< fault changes applied (starts, ends, jumps, steps)
@@ -203,7 +212,10 @@ class QuadrotorSim {
   /// newest message published (zero if none).
   ros::Time publishOdometry();
   void waitForReply(const ros::Time& odom_stamp);
-  void fusedCallback(const std_msgs::HeaderConstPtr& msg);
+  /// A report of the mapping (kMapping) or the planner (kPlanner): caught up with `stamp`.
+  enum Source { kMapping = 0, kPlanner = 1 };
+  void reportCallback(Source source, const std_msgs::HeaderConstPtr& msg);
+  /// The perception and planner locksteps: waits for each armed source to report within its lag.
   void waitForPerception(const ros::Time& clock);
   void publishClock();
   /// Applies the faults whose changes fall in (t0_s, t1_s] of simulated time (loop thread).
@@ -248,11 +260,11 @@ class QuadrotorSim {
   bool lockstep_suspended_ = false;
   std::atomic<uint64_t> current_step_{0};
 
-  // Perception lockstep state, written by the depth_fused callback (the command queue's thread).
+  // Perception and planner lockstep state, written by the report callbacks (the command queue's thread).
   std::mutex perception_mutex_;
   std::condition_variable perception_cv_;
-  ros::Time fused_stamp_;            // stamp of the last depth frame fused (zero: none yet)
-  bool perception_suspended_ = false;
+  ros::Time reported_[2];            // stamp of the last report per Source (zero: none yet)
+  bool suspended_[2] = {false, false};
   bool depth_blackout_ = false;      // inside a depth blackout fault (the loop's thread)
 
   mutable std::mutex stats_mutex_;
@@ -261,7 +273,7 @@ class QuadrotorSim {
   std::unique_ptr<TruthMapSubscriber> truth_;
   ros::CallbackQueue command_queue_;
   std::unique_ptr<ros::AsyncSpinner> command_spinner_;
-  ros::Subscriber command_sub_, fused_sub_;
+  ros::Subscriber command_sub_, fused_sub_, planner_sub_;
   ros::Publisher odom_pub_, truth_pub_, fc_odom_pub_, collision_pub_, clock_pub_;
   ros::Publisher depth_blackout_pub_, odom_offset_pub_, fault_event_pub_;
   tf2_ros::TransformBroadcaster tf_broadcaster_;
