@@ -584,6 +584,21 @@ TEST(ReplanFsm, BacksOffWhenHoldingAtTheEdgeOfTheKnownSpace) {
   }
 }
 
+// A wall across the corridor at x = 10 with a notch at its top (2 m wide, above 2 m) on the straight
+// way that the map never observes, and a window (1.2 m) 3 m aside, known free.
+const EsdfMap& notchAndWindowWall(Corridor* c) {
+  c->scene.fill([](const Eigen::Vector3d& p) {
+    const bool wall = p.x() >= 10.0 && p.x() <= 10.4;
+    const bool window = std::abs(p.y() - 1.0) <= 0.6 && std::abs(p.z() - 1.3) <= 0.6;
+    const bool notch = std::abs(p.y() - 4.0) <= 1.0 && p.z() >= 2.0;
+    return wall && !window && !notch;
+  });
+  c->scene.fill([](const Eigen::Vector3d& p) {
+    return p.x() >= 9.0 && p.x() <= 11.4 && std::abs(p.y() - 4.0) <= 1.0 && p.z() >= 2.0;
+  }, VoxelState::kUnknown);
+  return c->scene.finish();
+}
+
 // A stall with every plan succeeding: the straight way is through a notch at the top of a wall
 // (2 m wide, above 2 m) that the map never observes (the camera does not see over the wall's edge),
 // so every plan is cut to a hold before it; a window 5 m aside is known free. Back-offs are off, so
@@ -592,16 +607,7 @@ TEST(ReplanFsm, BacksOffWhenHoldingAtTheEdgeOfTheKnownSpace) {
 // the mission's time limit and gives up.
 TEST(ReplanFsm, ReroutesAroundWhereItStalled) {
   Corridor c;
-  c.scene.fill([](const Eigen::Vector3d& p) {
-    const bool wall = p.x() >= 10.0 && p.x() <= 10.4;
-    const bool window = std::abs(p.y() - 1.0) <= 0.6 && std::abs(p.z() - 1.3) <= 0.6;
-    const bool notch = std::abs(p.y() - 4.0) <= 1.0 && p.z() >= 2.0;
-    return wall && !window && !notch;
-  });
-  c.scene.fill([](const Eigen::Vector3d& p) {
-    return p.x() >= 9.0 && p.x() <= 11.4 && std::abs(p.y() - 4.0) <= 1.0 && p.z() >= 2.0;
-  }, VoxelState::kUnknown);
-  const EsdfMap& map = c.scene.finish();
+  const EsdfMap& map = notchAndWindowWall(&c);
   auto mapAt = [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; };
   for (const double progress_timeout_s : {5.0, 0.0}) {
     SCOPED_TRACE("progress_timeout_s " + std::to_string(progress_timeout_s));
@@ -639,16 +645,7 @@ TEST(ReplanFsm, ReroutesAroundWhereItStalled) {
 // holds there until the mission's time limit.
 TEST(ReplanFsm, AvoidsThePlaceItHeldAtAfterBackingOff) {
   Corridor c;
-  c.scene.fill([](const Eigen::Vector3d& p) {
-    const bool wall = p.x() >= 10.0 && p.x() <= 10.4;
-    const bool window = std::abs(p.y() - 1.0) <= 0.6 && std::abs(p.z() - 1.3) <= 0.6;
-    const bool notch = std::abs(p.y() - 4.0) <= 1.0 && p.z() >= 2.0;
-    return wall && !window && !notch;
-  });
-  c.scene.fill([](const Eigen::Vector3d& p) {
-    return p.x() >= 9.0 && p.x() <= 11.4 && std::abs(p.y() - 4.0) <= 1.0 && p.z() >= 2.0;
-  }, VoxelState::kUnknown);
-  const EsdfMap& map = c.scene.finish();
+  const EsdfMap& map = notchAndWindowWall(&c);
   auto mapAt = [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; };
   // Progress tracked (the zone lies ahead along the way; no remedy within the mission's time limit),
   // or not tracked (the zone is around the hold).
