@@ -1697,6 +1697,9 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
     case FsmState::kEmergencyStop: {
       const bool stopped = (!current_ || t >= current_->endTime()) && odom_velocity_.norm() < config_.stopped_speed_mps;
       if (!stopped) break;
+      // At rest after an odometry jump: the hover is the anchor (the camera cannot see beside and
+      // behind it, and the map it flew through was in the old frame).
+      if (std::exchange(anchor_at_rest_, false)) known_anchor_ = takeoverStateLocked(t).position;
       // Stopped: a new reference from here through the mission's goals (or the newer ones).
       if (!goals_pending_) {
         pending_goals_ = remainingGoalsLocked();
@@ -1773,6 +1776,7 @@ FsmOutput ReplanFsm::checkSafety(double t, const EsdfMap& map) {
     emergencyStopLocked(t, map, text, &out, &from, ReplanStatus::kInvalidInput);
     current_->reanchor = out.trajectory->reanchor = true;  // the step to the measured position is deliberate
     out.odometry_jumped = true;
+    anchor_at_rest_ = true;
     flown_.clear();  // in the old frame
     route_stale_ = true;
     ++route_epoch_;

@@ -1309,6 +1309,57 @@ TEST(ReplanFsm, HoldsAtTheMeasuredPositionAfterAnOdometryJump) {
   EXPECT_FALSE(blind_log.braked);
 }
 
+// The same jump, with the map forgotten (the planner node's clear_map_on_odom_jump): the stop from
+// the measured position runs on into unknown space, and once at rest the camera (the cone of
+// StartsFromAHoverThroughTheCamerasBlindZone) sees ahead of the hover but not beside and behind it.
+// The hover is the new anchor, so the vehicle flies on; anchored at the measured position (a metre
+// behind) it held there, every plan cut to a hold by the blind zone (fault_odom_jump timed out).
+TEST(ReplanFsm, FliesOnFromWhereItStoppedAfterAnOdometryJumpClearedTheMap) {
+  const Eigen::Vector3d start(1, 4, 1.5), goal(14, 5, 1.5);
+  const double jump_at = 3.0;
+  Corridor before_scene, cleared_scene;
+  const EsdfMap& before = before_scene.scene.finish();
+  cleared_scene.scene.fill([](const Eigen::Vector3d&) { return true; }, VoxelState::kUnknown);
+  const EsdfMap& cleared = cleared_scene.scene.finish();
+  std::unique_ptr<Corridor> seen_scene;  // made once the vehicle is at rest
+  std::optional<Eigen::Vector3d> rest, last_position;
+  ReplanFsm::Config config = testConfig();
+  auto fsm = makeFsm(config);
+  auto mapAt = [&](double t, const Eigen::Vector3d& p) -> const EsdfMap& {
+    const bool still = last_position && (p - *last_position).norm() < 1e-6;
+    last_position = p;
+    if (t < jump_at) return before;
+    if (seen_scene) return seen_scene->scene.finish();
+    if (!still || t < jump_at + 0.5) return cleared;
+    // At rest: within 1.5 m of the hover only the camera's view cone (+x) is known; beyond, free.
+    rest = p;
+    seen_scene = std::make_unique<Corridor>();
+    const double tan_v = std::tan(32.0 * M_PI / 180.0), tan_h = std::tan(39.5 * M_PI / 180.0);
+    seen_scene->scene.fill([&](const Eigen::Vector3d& q) {
+      const Eigen::Vector3d d = q - *rest;
+      const bool in_view = d.x() > 0.0 && std::abs(d.z()) <= tan_v * d.x() && std::abs(d.y()) <= tan_h * d.x();
+      return d.norm() < 1.5 && !in_view;
+    }, VoxelState::kUnknown);
+    return seen_scene->scene.finish();
+  };
+  Faults faults;
+  faults.odom_jump_at = jump_at;
+  faults.odom_jump = Eigen::Vector3d(0.0, 1.0, 0.0);
+  const FlightLog log = fly(fsm.get(), start, {goal}, mapAt, 1200, before, faults);
+  ASSERT_TRUE(rest) << "the vehicle never came to rest after the jump";
+  EXPECT_GT(rest->x() - 1.0, 0.0);
+  EXPECT_TRUE(log.goal_reached) << "held at " << rest->transpose() << " for " << log.duration_s - jump_at << " s";
+  // Nothing beyond the anchor's radius was committed into the blind zone: everything flown after the
+  // stop lies in the cone, within the anchor radius of the hover, or outside the 1.5 m ball.
+  const double tan_v = std::tan(32.0 * M_PI / 180.0), tan_h = std::tan(39.5 * M_PI / 180.0);
+  for (const Eigen::Vector3d& q : log.flown) {
+    const Eigen::Vector3d d = q - *rest;
+    const bool in_view = d.x() > 0.0 && std::abs(d.z()) <= tan_v * d.x() && std::abs(d.y()) <= tan_h * d.x();
+    if (q.x() > rest->x() - 1e-6 && d.norm() < 1.5 && !in_view)
+      EXPECT_LE(d.norm(), config.known_start_radius_m + 1e-6) << q.transpose();
+  }
+}
+
 // The FSM's clock steps by +-5 s mid-flight: the commanded motion goes on without a jump, the FSM
 // replans from the current state and reaches the goal.
 TEST(ReplanFsm, TimeJumpsShiftTheTimingWithoutASetpointJump) {

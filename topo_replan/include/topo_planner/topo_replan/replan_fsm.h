@@ -501,6 +501,10 @@ class ReplanFsm {
   // Where the vehicle hovers without having been flown there by a committed trajectory (a mission's
   // start, a re-anchoring): the known-space commitment counts known_start_radius_m around it as known.
   std::optional<Eigen::Vector3d> known_anchor_;
+  // Set by an odometry jump: the stop from the measured position runs on into a map in the new frame
+  // (forgotten, or wrong by the jump), so the hover where it ends was not flown to through known
+  // space either; the anchor moves there once the vehicle is at rest.
+  bool anchor_at_rest_ = false;
   Eigen::Vector3d look_hold_position_ = Eigen::Vector3d::Zero();
   bool new_mission_ = false;              // set by setGoals: the next started reference begins a mission
   double last_progress_s_ = 0.0;          // the mission's start or its last successful plan (not a hold) [s]
