@@ -12,6 +12,7 @@
 // odometry message whatever the load), simulator_realtime.test on the wall clock. Waits are bounded in wall time with
 // generous limits (a loaded 2-core machine).
 
+#include <diagnostic_msgs/DiagnosticStatus.h>
 #include <geometry_msgs/PoseStamped.h>
 #include <gtest/gtest.h>
 #include <nav_msgs/Odometry.h>
@@ -30,6 +31,8 @@
 #include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <deque>
 #include <functional>
@@ -53,6 +56,7 @@ struct Observer {
   uint64_t info_count = 0;
   std::deque<ros::Time> pose_stamps;
   std::vector<topo_planner::Collision> collisions;
+  std::vector<diagnostic_msgs::DiagnosticStatus> sim_status;  // /quadrotor_sim/status
 
   // The command the test streams at 50 Hz (like the trajectory server's 100 Hz).
   bool streaming = false;
@@ -124,6 +128,18 @@ void poseCallback(const geometry_msgs::PoseStampedConstPtr& msg) {
   obs.pose_stamps.push_back(msg->header.stamp);
   if (obs.pose_stamps.size() > 200) obs.pose_stamps.pop_front();
 }
+void statusCallback(const diagnostic_msgs::DiagnosticStatusConstPtr& msg) {
+  std::lock_guard<std::mutex> lock(obs.mutex);
+  obs.sim_status.push_back(*msg);
+}
+
+// A value of a status report (NaN if absent).
+double statusValue(const diagnostic_msgs::DiagnosticStatus& s, const std::string& key) {
+  for (const diagnostic_msgs::KeyValue& kv : s.values)
+    if (kv.key == key) return std::atof(kv.value.c_str());
+  return NAN;
+}
+
 void collisionCallback(const topo_planner::CollisionConstPtr& msg) {
   std::lock_guard<std::mutex> lock(obs.mutex);
   obs.collisions.push_back(*msg);
@@ -139,6 +155,7 @@ class Simulator : public testing::Test {
     subs_.push_back(nh_->subscribe("/camera/depth/camera_info", 2, &infoCallback));
     subs_.push_back(nh_->subscribe("/camera/pose", 50, &poseCallback));
     subs_.push_back(nh_->subscribe("/quadrotor/collision", 10, &collisionCallback));
+    subs_.push_back(nh_->subscribe("/quadrotor_sim/status", 10, &statusCallback));
     command_pub_ = nh_->advertise<topo_planner::PositionCommand>("/planning/position_cmd", 10);
     rotor_pub_ = nh_->advertise<topo_planner::RotorCommand>("/controller/rotor_command", 10);
     odom_pub_ = nh_->advertise<nav_msgs::Odometry>("/odom", 10);
@@ -247,6 +264,32 @@ TEST_F(Simulator, HoversAtTheCommandedPoint) {
   ros::WallDuration(1.0).sleep();
   EXPECT_TRUE(settled()) << "at " << positionOf(latestOdom()).transpose();
   EXPECT_LT((positionOf(latestOdom()) - target).norm(), 0.05);
+}
+
+// The lockstep controller (sim time): at each odometry message the clock waits for the controller's
+// answer to it, and the answers come within lockstep_timeout_s (50 ms of wall time; the sanitizer
+// runs scale it). With the realistic profile (simulator_realistic.test) the controller flies on the
+// undelayed estimate (fc_odom) while the odometry is 30 ms late: its answers, stamped newer than any
+// odometry published, used to be refused, every wait timed out and the clock crawled at a twentieth
+// of the rate asked. Counted over 200 waits between two of the simulator's status reports.
+TEST_F(Simulator, TheControllerAnswersEveryOdometryInTime) {
+  if (!ros::Time::isSimTime()) GTEST_SKIP() << "the lockstep runs in sim time only";
+  auto latest = [] {
+    std::lock_guard<std::mutex> lock(obs.mutex);
+    return obs.sim_status.empty() ? diagnostic_msgs::DiagnosticStatus() : obs.sim_status.back();
+  };
+  diagnostic_msgs::DiagnosticStatus first;
+  ASSERT_TRUE(waitFor([&] { return statusValue(first = latest(), "lockstep_waits") > 0.0; }, 30.0))
+      << "no status report with lockstep waits on /quadrotor_sim/status";
+  const double waits0 = statusValue(first, "lockstep_waits"), timeouts0 = statusValue(first, "lockstep_timeouts");
+  diagnostic_msgs::DiagnosticStatus later;
+  ASSERT_TRUE(waitFor([&] { return statusValue(later = latest(), "lockstep_waits") >= waits0 + 200.0; }, 60.0))
+      << "the clock waited " << statusValue(later, "lockstep_waits") - waits0 << " times since the first report";
+  const double waits = statusValue(later, "lockstep_waits") - waits0;
+  const double timeouts = statusValue(later, "lockstep_timeouts") - timeouts0;
+  EXPECT_LE(timeouts, 0.02 * waits) << timeouts << " of " << waits << " waits timed out";
+  std::printf("lockstep: %.0f of %.0f waits timed out; real-time factor %.2f\n", timeouts, waits,
+              statusValue(later, "realtime_factor"));
 }
 
 TEST_F(Simulator, CameraPublishesDepthFrames) {

@@ -1,5 +1,6 @@
 #include "topo_planner/uav_sim/ros/quadrotor_sim.h"
 
+#include <diagnostic_msgs/DiagnosticStatus.h>
 #include <geometry_msgs/TransformStamped.h>
 #include <geometry_msgs/Vector3Stamped.h>
 #include <rosgraph_msgs/Clock.h>
@@ -213,6 +214,7 @@ std::unique_ptr<QuadrotorSim> QuadrotorSim::create(const ros::NodeHandle& nh, co
   s.depth_blackout_pub_ = s.pnh_.advertise<std_msgs::Bool>("depth_blackout", 1, /*latch=*/true);
   s.odom_offset_pub_ = s.pnh_.advertise<geometry_msgs::Vector3Stamped>("odom_offset", 1, /*latch=*/true);
   s.fault_event_pub_ = s.pnh_.advertise<std_msgs::String>("fault_event", 20);
+  s.status_pub_ = s.pnh_.advertise<diagnostic_msgs::DiagnosticStatus>("status", 5, /*latch=*/true);
   s.static_broadcaster_.sendTransform(
       toTransform(config.T_body_camera, ros::Time(config.clock_start_s), config.body_frame, config.camera_frame));
 
@@ -543,14 +545,22 @@ ros::Time QuadrotorSim::publishOdometry() {
     for (int a = 0; a < 3; ++a) drift_[a] += config_.position_drift_m_per_sqrt_s * std::sqrt(dt) * n01(noise_rng_);
     measured.position += drift_;
   }
+  // The stamp the controller's answer is waited for (lockstep): the estimate it flies on.
+  ros::Time reply_to;
   if (fc_odom_pub_.getNumSubscribers() > 0) {
     // The flight controller's estimate: the estimator's frame (its drift and jumps), at the IMU's
-    // latency and smoothness (no white noise, no delay).
+    // latency and smoothness (no white noise, no delay). Its subscriber is the controller (the
+    // realistic profile), which answers this stamp, newer than the delayed odometry's.
     Quadrotor::State fc = measured;
     fc.position += odom_offset_;
     nav_msgs::Odometry msg;
     stateToOdometry(fc, stamp, config_.world_frame, config_.body_frame, &msg);
+    {
+      std::lock_guard<std::mutex> lock(command_mutex_);
+      newest_published_ = stamp;
+    }
     fc_odom_pub_.publish(msg);
+    reply_to = stamp;
   }
   if (config_.position_noise_m > 0.0 || config_.velocity_noise_mps > 0.0) {
     std::normal_distribution<double> n01(0.0, 1.0);
@@ -577,7 +587,7 @@ ros::Time QuadrotorSim::publishOdometry() {
     T.linear() = Eigen::Quaterniond(q.w, q.x, q.y, q.z).toRotationMatrix();
     T.translation() = Eigen::Vector3d(msg.pose.pose.position.x, msg.pose.pose.position.y, msg.pose.pose.position.z);
     tf_broadcaster_.sendTransform(toTransform(T, msg.header.stamp, config_.world_frame, config_.body_frame));
-    {
+    if (reply_to.isZero()) {  // (else the controller's estimate is the newer: answers to it count)
       std::lock_guard<std::mutex> lock(command_mutex_);
       newest_published_ = msg.header.stamp;
     }
@@ -585,12 +595,16 @@ ros::Time QuadrotorSim::publishOdometry() {
     newest = msg.header.stamp;
     pending_.pop_front();
   }
-  return newest;
+  return reply_to.isZero() ? newest : reply_to;
 }
 
 void QuadrotorSim::waitForReply(const ros::Time& odom_stamp) {
   std::unique_lock<std::mutex> lock(command_mutex_);
   if (!have_command_ || lockstep_suspended_) return;
+  {
+    std::lock_guard<std::mutex> stats_lock(stats_mutex_);
+    ++stats_.lockstep_waits;
+  }
   const bool answered = command_cv_.wait_for(lock, std::chrono::duration<double>(config_.lockstep_timeout_s),
                                              [&] { return stop_ || command_answers_ >= odom_stamp; });
   if (answered) return;
@@ -653,15 +667,40 @@ void QuadrotorSim::logStatus(double wall_s, uint64_t steps_in_period) {
   const double factor = steps_in_period * config_.step_s / wall_s;
   ROS_INFO(
       "quadrotor_sim: t %.1f s, real-time factor %.2f (asked %.2f), at (%.2f %.2f %.2f) %.2f m/s, "
-      "%u collisions, %lu commands (%lu refused), %lu lockstep timeouts, %lu failsafes, %lu backlogs dropped, "
+      "%u collisions, %lu commands (%lu refused), %lu lockstep waits (%lu in vain), %lu failsafes, %lu backlogs dropped, "
       "%lu fault changes, %lu odometry messages dropped, %lu waits for the mapping (%lu in vain), %lu for the "
       "planner (%lu in vain)",
       stampOf(step_).toSec(), factor, config_.publish_clock ? config_.realtime_factor : 1.0, q.position.x(),
       q.position.y(), q.position.z(), q.velocity.norm(), s.collisions, (unsigned long)s.commands,
-      (unsigned long)s.bad_commands, (unsigned long)s.lockstep_timeouts, (unsigned long)s.failsafe_events,
+      (unsigned long)s.bad_commands, (unsigned long)s.lockstep_waits, (unsigned long)s.lockstep_timeouts, (unsigned long)s.failsafe_events,
       (unsigned long)s.lag_events, (unsigned long)s.fault_events, (unsigned long)s.odom_dropped,
       (unsigned long)s.perception_waits, (unsigned long)s.perception_timeouts, (unsigned long)s.planner_waits,
       (unsigned long)s.planner_timeouts);
+  // The same on ~status (the counters since the start), for tests and benchmarks.
+  diagnostic_msgs::DiagnosticStatus status;
+  status.name = "quadrotor_sim";
+  status.hardware_id = "simulator";
+  status.level = s.collisions > 0 ? diagnostic_msgs::DiagnosticStatus::WARN : diagnostic_msgs::DiagnosticStatus::OK;
+  status.message = s.collisions > 0 ? "collisions" : "ok";
+  auto add = [&](const char* key, double value) {
+    diagnostic_msgs::KeyValue kv;
+    kv.key = key;
+    char text[32];
+    std::snprintf(text, sizeof(text), "%.6g", value);
+    kv.value = text;
+    status.values.push_back(kv);
+  };
+  add("sim_time_s", stampOf(step_).toSec());
+  add("realtime_factor", factor);
+  add("collisions", s.collisions);
+  add("commands", double(s.commands));
+  add("lockstep_waits", double(s.lockstep_waits));
+  add("lockstep_timeouts", double(s.lockstep_timeouts));
+  add("perception_waits", double(s.perception_waits));
+  add("perception_timeouts", double(s.perception_timeouts));
+  add("planner_waits", double(s.planner_waits));
+  add("planner_timeouts", double(s.planner_timeouts));
+  status_pub_.publish(status);
   if (config_.publish_clock && factor < 0.8 * config_.realtime_factor)
     ROS_WARN(
         "quadrotor_sim: the simulation runs at %.2f x real time, below the %.2f asked (loaded machine or a slow "

@@ -182,7 +182,8 @@ class QuadrotorSim {
     uint32_t collisions = 0;
     uint64_t commands = 0;      ///< rotor commands accepted
     uint64_t bad_commands = 0;  ///< refused (NaN/inf/negative)
-    uint64_t lockstep_timeouts = 0;
+    uint64_t lockstep_waits = 0;     ///< odometry messages the clock waited to be answered for
+    uint64_t lockstep_timeouts = 0;  ///< ... in vain
     uint64_t perception_waits = 0;     ///< times the clock waited for the mapping
     uint64_t perception_timeouts = 0;  ///< ... in vain
     uint64_t planner_waits = 0;        ///< times the clock waited for the planner
@@ -208,8 +209,9 @@ class QuadrotorSim {
   /// One RK4 step under the current command, then the ground and collision checks.
   void step(const std::shared_ptr<const TruthMap>& map);
   void checkCollision(const std::shared_ptr<const TruthMap>& map);
-  /// Queues the odometry of the current state and publishes what is due; returns the stamp of the
-  /// newest message published (zero if none).
+  /// Queues the odometry of the current state and publishes what is due, and the flight controller's
+  /// undelayed estimate (fc_odom) when subscribed; returns the stamp the controller answers: the
+  /// estimate's when published, else the newest odometry's (zero if none).
   ros::Time publishOdometry();
   void waitForReply(const ros::Time& odom_stamp);
   /// A report of the mapping (kMapping) or the planner (kPlanner): caught up with `stamp`.
@@ -275,7 +277,7 @@ class QuadrotorSim {
   std::unique_ptr<ros::AsyncSpinner> command_spinner_;
   ros::Subscriber command_sub_, fused_sub_, planner_sub_;
   ros::Publisher odom_pub_, truth_pub_, fc_odom_pub_, collision_pub_, clock_pub_;
-  ros::Publisher depth_blackout_pub_, odom_offset_pub_, fault_event_pub_;
+  ros::Publisher depth_blackout_pub_, odom_offset_pub_, fault_event_pub_, status_pub_;
   tf2_ros::TransformBroadcaster tf_broadcaster_;
   tf2_ros::StaticTransformBroadcaster static_broadcaster_;
   std::atomic<bool> stop_{false};
