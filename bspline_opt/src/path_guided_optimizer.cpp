@@ -70,7 +70,8 @@ struct RefineProblem {
     if (g) g->setZero();
     const double s = smoothnessCost(q, first, last, c.l2s, g);
     const double col = collisionCost(q, first, last, *map, c.d0_m, c.l2c, g, c.min_z_m, c.max_z_m);
-    const double d = velocityCost(q, dt, c.max_vel_mps, c.l2d, g) + accelerationCost(q, dt, c.max_acc_mps2, c.l2d, g);
+    const double d = velocityCost(q, dt, c.feasibility_margin * c.max_vel_mps, c.l2d, g) +
+                     accelerationCost(q, dt, c.feasibility_margin * c.max_acc_mps2, c.l2d, g);
     if (fs) *fs = s;
     if (fc) *fc = col;
     if (fd) *fd = d;
@@ -117,6 +118,7 @@ bool PathGuidedOptimizer::Config::validate(std::string* why) const {
   if (!std::isfinite(d0_m) || d0_m <= 0.0) return fail("d0_m must be positive");
   if (!std::isfinite(max_vel_mps) || max_vel_mps <= 0.0 || !std::isfinite(max_acc_mps2) || max_acc_mps2 <= 0.0)
     return fail("max_vel_mps and max_acc_mps2 must be positive");
+  if (!(feasibility_margin > 0.0 && feasibility_margin <= 1.0)) return fail("feasibility_margin must be in (0, 1]");
   const int algorithm_id = int(nlopt_algorithm_from_string(algorithm.c_str()));
   if (algorithm_id < 0 || algorithm_id >= int(NLOPT_NUM_ALGORITHMS))
     return fail("unknown NLopt algorithm '" + algorithm + "'");

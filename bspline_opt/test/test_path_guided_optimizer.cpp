@@ -290,6 +290,11 @@ TEST(PathGuidedOptimizer, InvalidInputIsAStatusNotACrash) {
   c = testConfig();
   c.max_iterations = 0;
   EXPECT_EQ(PathGuidedOptimizer(c).gto(good, map).status, OptimizationStatus::kInvalidInput);
+  for (const double margin : {0.0, -0.5, 1.01, double(NAN)}) {
+    c = testConfig();
+    c.feasibility_margin = margin;
+    EXPECT_EQ(PathGuidedOptimizer(c).gto(good, map).status, OptimizationStatus::kInvalidInput) << margin;
+  }
 }
 
 TEST(PathGuidedOptimizer, NonFiniteCostIsOptimizationFailed) {

@@ -551,6 +551,7 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("optimizer/max_iterations", p.optimizer.max_iterations);
   r.read("optimizer/max_time_s", p.optimizer.max_time_s);
   r.read("optimizer/lambda_collision", p.optimizer.l2c);
+  r.read("optimizer/feasibility_margin", p.optimizer.feasibility_margin);
   // The planning's wall-clock budgets (the roadmap's sampling time, NLopt's time per run) stretch on
   // a slow machine (sanitizers: the Makefile sets it with TOPO_PLANNER_BUDGET_SCALE); the counts
   // (samples, evaluations) stay as they are. 1 in flight.

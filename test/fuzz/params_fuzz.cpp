@@ -161,6 +161,7 @@ void fuzzPlanner(FuzzInput& in) {
   p.astar.clearance_m = in.number(p.astar.clearance_m);
   f.rest_retry_interval_s = in.number(f.rest_retry_interval_s);  // read last: the corpus keeps its layout
   f.moving_retry_interval_s = in.number(f.moving_retry_interval_s);
+  p.optimizer.feasibility_margin = in.number(p.optimizer.feasibility_margin);
 
   std::string why;
   if (!f.validate(&why)) {

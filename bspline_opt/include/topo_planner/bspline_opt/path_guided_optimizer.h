@@ -89,6 +89,11 @@ class PathGuidedOptimizer {
     double d0_m = 0.5;  ///< the collision cost is zero at ESDF distances beyond this [m]
     double max_vel_mps = 3.0;   ///< velocity limit (feasibility cost, reallocation, check) [m/s]
     double max_acc_mps2 = 2.5;  ///< acceleration limit [m/s^2]
+    /// The refine phase's feasibility cost starts at this fraction of max_vel_mps and max_acc_mps2,
+    /// in (0, 1]; the reallocation and the check keep the full limits. Below 1 the refined curves
+    /// keep headroom: a replan that starts from their state (accelerating near the limit) can still
+    /// turn or slow down without a stretch that steps its start velocity. 1: the paper's cost.
+    double feasibility_margin = 1.0;
     std::string algorithm = "LD_LBFGS";  ///< NLopt algorithm name, e.g. LD_LBFGS, LD_MMA, LD_TNEWTON_PRECOND_RESTART
     int max_iterations = 200;  ///< NLopt objective evaluations per phase-2 run (maxeval)
     double max_time_s = 0.0;   ///< NLopt time limit per phase-2 run [s]; 0 = none (tests use counts only)
