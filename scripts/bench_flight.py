@@ -127,6 +127,8 @@ def run_world_flight(args, style, density, sensing, seed, out_dir):
                 'log': os.path.join(out_dir, name + '.log')}
     extra = ['--', f'map_file:={bt}', f'sensing:={sensing}', 'map_origin:=[-20.0, -10.0, 0.3]',
              'map_size:=[40.0, 20.0, 3.4]']
+    if args.dump_failed_plans:
+        extra.append(f'dump_failed_plans:={os.path.join(out_dir, name + "_plans")}')
     # The map comes from the file: the generator's style does not apply (and 'boxes' is not one of its).
     f = run_flight(args, density, seed, out_dir, name=name, goals=goals, extra=extra)
     f.update({'style': style, 'sensing': sensing, 'kinds': kinds})
@@ -301,6 +303,9 @@ def main(argv):
     ap.add_argument('--sensing', default='ideal,realistic', help='worlds suite: sensing profiles')
     ap.add_argument('--resume', action='store_true',
                     help='worlds suite: reuse the reports of flights already in OUT (an interrupted run)')
+    ap.add_argument('--dump-failed-plans', action='store_true',
+                    help='worlds suite: save each failed replanning problem in OUT/bench_flight/<flight>_plans for '
+                         'replay_plan.launch (planner.launch dump_failed_plans)')
     args = ap.parse_args(argv[1:])
     args.ws = os.environ.get('WS', os.path.join(ROOT, 'build', 'ws'))
     if args.default_goals:

@@ -409,6 +409,42 @@ OptimizationResult PathGuidedOptimizer::optimize(const UniformBspline& initial, 
   OptimizationResult result = refinePhase(warmup.spline, map);
   UniformBspline refined = result.spline;  // before finish() reallocates its time
   if (result.status == OptimizationStatus::kSuccess) finish(map, &result);
+  if (result.status == OptimizationStatus::kInCollision && config_.stretched_retry) {
+    // The guide phase's spline timed for the refine's limits (see Config::stretched_retry).
+    const double margin_vel = config_.feasibility_margin * config_.max_vel_mps,
+                 margin_acc = config_.feasibility_margin * config_.max_acc_mps2;
+    UniformBspline stretched = warmup.spline;
+    const double dt0 = stretched.knotSpan();
+    if (stretched.reallocateTime(margin_vel, margin_acc, true) > 1.0) {
+      OptimizationResult again = refinePhase(stretched, map);
+      if (again.status == OptimizationStatus::kSuccess) {
+        // The refined curve is smoother than the guide phase's: as fast as the limits allow, never
+        // faster than the segment's timing.
+        UniformBspline& q = again.spline;
+        const double need = std::max(q.maxVelocityPastStart() / margin_vel, std::sqrt(q.maxAccelerationPastStart() / margin_acc));
+        if (std::isfinite(need) && need > 0.0) q.setKnotSpan(std::max(dt0, q.knotSpan() * need));
+        const double stretch = q.knotSpan() / dt0;
+        finish(map, &again);
+        again.stats.time_ratio *= stretch;
+        if (again.status == OptimizationStatus::kSuccess && again.stats.time_ratio > config_.max_time_ratio) {
+          again.status = OptimizationStatus::kInfeasible;
+          again.message = "time reallocation above max_time_ratio";
+        }
+        again.stats.phase2_ms += result.stats.phase2_ms;
+        again.stats.check_ms += result.stats.check_ms;
+        again.stats.iterations += result.stats.iterations;
+        again.stats.runs += result.stats.runs;
+        if (again.status == OptimizationStatus::kSuccess) {
+          result = std::move(again);
+        } else {  // the collision retries go on from the first refine; the time spent counts
+          result.stats.phase2_ms = again.stats.phase2_ms;
+          result.stats.check_ms = again.stats.check_ms;
+          result.stats.iterations = again.stats.iterations;
+          result.stats.runs = again.stats.runs;
+        }
+      }
+    }
+  }
   Config stronger = config_;
   for (int retry = 0; retry < config_.collision_retries && result.status == OptimizationStatus::kInCollision; ++retry) {
     stronger.l2c *= config_.collision_retry_factor;

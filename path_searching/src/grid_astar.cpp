@@ -7,6 +7,20 @@
 namespace topo_planner {
 
 GridAStar::Result GridAStar::search(const EsdfMap& map, const Eigen::Vector3d& start, const Eigen::Vector3d& goal) {
+  double margin = config_.search_margin_m;
+  Result result = searchBox(map, start, goal, margin);
+  int expansions = result.expansions;
+  for (int k = 0; k < config_.margin_doublings && result.status == SearchStatus::kNoPath; ++k) {
+    margin *= 2.0;
+    result = searchBox(map, start, goal, margin);
+    expansions += result.expansions;
+  }
+  result.expansions = expansions;
+  return result;
+}
+
+GridAStar::Result GridAStar::searchBox(const EsdfMap& map, const Eigen::Vector3d& start, const Eigen::Vector3d& goal,
+                                       double margin_m) {
   Result result;
   if (!start.allFinite() || !goal.allFinite()) return result;
   const GridGeometry& g = map.geometry();
@@ -26,7 +40,7 @@ GridAStar::Result GridAStar::search(const EsdfMap& map, const Eigen::Vector3d& s
   }
 
   // The search box and its dense, generation-stamped buffers.
-  const int margin = int(std::ceil(config_.search_margin_m / g.resolution()));
+  const int margin = int(std::ceil(std::min(margin_m, 1e6) / g.resolution()));
   VoxelBox box;
   box.extend(s);
   box.extend(e);

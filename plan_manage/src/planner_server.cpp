@@ -6,9 +6,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
 #include <random>
 
 #include "topo_planner/plan_manage/trajectory_conversions.h"
+#include "topo_planner/topo_replan/plan_problem_io.h"
 #include "topo_planner/Bspline.h"
 #include "topo_planner/PlannerHeartbeat.h"
 #include "topo_planner/ReplanEvent.h"
@@ -21,6 +24,29 @@ std::unique_ptr<PlannerServer> PlannerServer::create(const ros::NodeHandle& nh, 
   std::unique_ptr<PlannerServer> server(new PlannerServer(nh, config));
   server->fsm_ = ReplanFsm::create(config.fsm, error);
   if (!server->fsm_) return nullptr;
+  if (!config.node.dump_failed_plans_dir.empty()) {
+    // Diagnostics: each failed replanning problem saved for replay_plan (planning thread only).
+    const std::string dir = config.node.dump_failed_plans_dir;
+    std::error_code ec;
+    std::filesystem::create_directories(dir, ec);
+    if (ec) {
+      if (error) *error = "debug/dump_failed_plans_dir: cannot create '" + dir + "': " + ec.message();
+      return nullptr;
+    }
+    PlannerServer* s = server.get();
+    const int max_dumps = config.node.max_failed_plan_dumps;
+    server->fsm_->setPlanObserver([s, dir, max_dumps](const EsdfMap& map, const ReplanRequest& request,
+                                                      const ReplanResult& result) {
+      if (result.status == ReplanStatus::kSuccess || s->failed_plan_dumps_ >= max_dumps) return;
+      char name[32];
+      std::snprintf(name, sizeof(name), "/plan_%05d", s->failed_plan_dumps_++);
+      std::string why;
+      if (savePlanProblem(dir + name, map, request, result.message, &why))
+        ROS_INFO_THROTTLE(5.0, "planner: failed plan saved as %s%s.problem (replay_plan)", dir.c_str(), name);
+      else
+        ROS_WARN_THROTTLE(5.0, "planner: could not save a failed plan: %s", why.c_str());
+    });
+  }
   // The mapping in ~mapping, on its own queue.
   ros::NodeHandle mapping_nh(nh, "mapping");
   mapping_nh.setCallbackQueue(&server->mapping_queue_);
@@ -456,6 +482,8 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("odom_timeout_s", f.odom_timeout_s);
   r.read("vis_sample_s", c.node.vis_sample_s);
   r.read("clear_map_on_odom_jump", c.node.clear_map_on_odom_jump);
+  r.read("debug/dump_failed_plans_dir", c.node.dump_failed_plans_dir);
+  r.read("debug/max_failed_plan_dumps", c.node.max_failed_plan_dumps);
   std::vector<double> goals;
   r.read("goals_m", goals);
   if (goals.size() % 3 != 0) r.errors() << "goals_m must hold x, y, z triples; ";
@@ -545,6 +573,7 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("search/unknown_is_free", p.search.unknown_is_free);
   r.read("optimizer/unknown_is_free", p.optimizer.unknown_is_free);
   r.read("astar/unknown_is_free", p.astar.unknown_is_free);
+  r.read("astar/margin_doublings", p.astar.margin_doublings);
   p.search.keep_raw_paths = true;  // the roadmap for rviz (~vis/roadmap)
   r.read("search/keep_roadmap", p.search.keep_raw_paths);
   r.read("optimizer/clearance_m", p.optimizer.clearance_m);
@@ -552,6 +581,7 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("optimizer/max_time_s", p.optimizer.max_time_s);
   r.read("optimizer/lambda_collision", p.optimizer.l2c);
   r.read("optimizer/feasibility_margin", p.optimizer.feasibility_margin);
+  r.read("optimizer/stretched_retry", p.optimizer.stretched_retry);
   // The planning's wall-clock budgets (the roadmap's sampling time, NLopt's time per run) stretch on
   // a slow machine (sanitizers: the Makefile sets it with TOPO_PLANNER_BUDGET_SCALE); the counts
   // (samples, evaluations) stay as they are. 1 in flight.

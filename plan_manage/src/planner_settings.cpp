@@ -16,6 +16,8 @@ bool PlannerSettings::validate(std::string* why) const {
     e << "vis_sample_s must be finite and at least " << kMinVisSampleS << " s; ";
   if (!std::isfinite(goal_height_m)) e << "goal_height_m must be finite; ";
   if (!(reference_speed_ratio > 0.0 && reference_speed_ratio <= 1.0)) e << "reference/speed_ratio must be in (0, 1]; ";
+  if (!(max_failed_plan_dumps >= 0 && max_failed_plan_dumps <= kMaxFailedPlanDumps))
+    e << "debug/max_failed_plan_dumps must be in [0, " << kMaxFailedPlanDumps << "]; ";
   for (const Eigen::Vector3d& g : goals)
     if (!g.allFinite()) {
       e << "goals_m must be finite; ";

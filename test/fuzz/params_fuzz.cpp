@@ -162,6 +162,8 @@ void fuzzPlanner(FuzzInput& in) {
   f.rest_retry_interval_s = in.number(f.rest_retry_interval_s);  // read last: the corpus keeps its layout
   f.moving_retry_interval_s = in.number(f.moving_retry_interval_s);
   p.optimizer.feasibility_margin = in.number(p.optimizer.feasibility_margin);
+  p.optimizer.stretched_retry = in.flag();
+  p.astar.margin_doublings = in.integer(p.astar.margin_doublings);
 
   std::string why;
   if (!f.validate(&why)) {

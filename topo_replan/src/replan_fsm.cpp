@@ -227,17 +227,14 @@ bool ReplanFsm::Config::validate(std::string* why) const {
   return true;
 }
 
-namespace {
 // The replanner's settings with the route's height band (the geofence) applied to its searches and
 // its final check.
-TopoReplanner::Config bandedReplanner(const ReplanFsm::Config& config) {
+TopoReplanner::Config ReplanFsm::replannerConfig(const Config& config) {
   TopoReplanner::Config c = config.replanner;
   c.search.roadmap.min_z_m = c.astar.min_z_m = c.optimizer.min_z_m = config.route.min_z_m;
   c.search.roadmap.max_z_m = c.astar.max_z_m = c.optimizer.max_z_m = config.route.max_z_m;
   return c;
 }
-
-}  // namespace
 
 std::unique_ptr<ReplanFsm> ReplanFsm::create(const Config& config, std::string* error) {
   std::string why;
@@ -245,7 +242,7 @@ std::unique_ptr<ReplanFsm> ReplanFsm::create(const Config& config, std::string* 
     if (error) *error = "invalid FSM config: " + why;
     return nullptr;
   }
-  std::unique_ptr<TopoReplanner> replanner = TopoReplanner::create(bandedReplanner(config), error);
+  std::unique_ptr<TopoReplanner> replanner = TopoReplanner::create(replannerConfig(config), error);
   if (!replanner) return nullptr;
   return std::unique_ptr<ReplanFsm>(new ReplanFsm(config, std::move(replanner)));
 }
@@ -285,7 +282,7 @@ bool ReplanFsm::reconfigure(const Config& config, std::string* why) {
 void ReplanFsm::applyPendingConfigLocked(FsmOutput* out) {
   if (!pending_config_) return;
   std::string error;
-  std::unique_ptr<TopoReplanner> replanner = TopoReplanner::create(bandedReplanner(*pending_config_), &error);
+  std::unique_ptr<TopoReplanner> replanner = TopoReplanner::create(replannerConfig(*pending_config_), &error);
   if (!out->message.empty()) out->message += "; ";
   if (replanner) {
     config_ = *pending_config_;
@@ -1392,6 +1389,7 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
   lock->unlock();
   ReplanResult result = replanner_->replan(map, request);
   const double finished = now ? now() : t;
+  if (plan_observer_) plan_observer_(map, request, result);
   lock->lock();
 
   // The known-space commitment of a successful plan (on the map it was planned on).

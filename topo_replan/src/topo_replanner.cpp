@@ -57,6 +57,8 @@ bool TopoReplanner::Config::validate(std::string* why) const {
   if (!(max_start_velocity_step_mps >= 0.0)) err << "max_start_velocity_step_mps must be >= 0; ";
   if (!(max_search_start_offset_m >= 0.0 && max_search_start_offset_m <= 5.0))
     err << "max_search_start_offset_m must be in [0, 5]; ";
+  if (!(std::isfinite(astar.search_margin_m) && astar.search_margin_m >= 0.0)) err << "astar: search_margin_m must be >= 0; ";
+  if (astar.margin_doublings < 0 || astar.margin_doublings > 6) err << "astar: margin_doublings must be in [0, 6]; ";
   if (num_threads < 1 || num_threads > 64) err << "num_threads must be in [1, 64]; ";
   if (!(std::isfinite(duration_weight) && duration_weight >= 0.0)) err << "duration_weight must be >= 0; ";
   const std::string s = err.str();
@@ -323,8 +325,14 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
       // an initial spline along the guide, timed for its length (the fast path is unchanged).
       if (c.result.status != OptimizationStatus::kSuccess)
         if (const std::optional<UniformBspline> along = initialAlong(lp, c.guide)) {
+          c.retried_along = true;
+          c.first_status = c.result.status;
+          c.first_min_clearance_m = c.result.stats.min_clearance_m;
           OptimizationResult second = optimizers_[size_t(worker)].optimize(*along, c.guide, map);
-          if (second.status == OptimizationStatus::kSuccess) c.result = std::move(second);
+          // The better attempt is kept (and reported): the one that passed, else the clearer one.
+          if (second.status == OptimizationStatus::kSuccess ||
+              (second.status == c.result.status && second.stats.min_clearance_m > c.result.stats.min_clearance_m))
+            c.result = std::move(second);
         }
       if (c.result.status == OptimizationStatus::kSuccess) {
         c.selection_cost = c.result.cost.jerk_integral_m2ps5 + config_.duration_weight * c.result.cost.duration_s;
@@ -398,6 +406,9 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
         why << " (least time ratio " << std::fixed << std::setprecision(2) << best_ratio << ")";
       why << ";";
     }
+    const long retried = std::count_if(result.candidates.begin(), result.candidates.end(),
+                                       [](const ReplanCandidate& c) { return c.retried_along; });
+    if (retried > 0) why << " " << retried << " of them tried again along the guide;";
     std::string message = why.str();
     message.pop_back();
     char ends[160];

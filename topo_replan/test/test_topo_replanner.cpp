@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <functional>
 #include <memory>
+#include <tuple>
 
 #include "topo_planner/plan_env/synthetic_scene.h"
 #include "topo_planner/topo_replan/topo_replanner.h"
@@ -332,11 +333,12 @@ TEST(TopoReplanner, GoalsBesideObstaclesAreReachedOnTheFinalApproach) {
        },
        {8.0, 5.0, 1.5}},
   };
-  // Variants: as configured; without guide timing nor collision retries (the ablation); without
-  // guide timing but with the retries (PathGuidedOptimizer::Config::collision_retries), which rescue
-  // some of the wall cases on their own.
+  // Variants: as configured; without guide timing, collision retries nor the stretched retry (the
+  // ablation); with only the collision retries (PathGuidedOptimizer::Config::collision_retries);
+  // with only the stretched retry (Config::stretched_retry). Each rescues some of the wall cases.
   std::vector<int> failures;
-  for (const auto& [timed_guides, retries] : std::vector<std::pair<bool, bool>>{{true, true}, {false, false}, {false, true}}) {
+  for (const auto& [timed_guides, retries, stretched] : std::vector<std::tuple<bool, bool, bool>>{
+           {true, true, true}, {false, false, false}, {false, true, false}, {false, false, true}}) {
     int failed = 0;
     for (const Case& c : cases) {
       SyntheticScene scene({14.0, 8.0, 3.0});
@@ -352,6 +354,7 @@ TEST(TopoReplanner, GoalsBesideObstaclesAreReachedOnTheFinalApproach) {
         config.local_goal_margin_m = 2.0;
         if (!timed_guides) config.guide_timing_ratio = 1e9;
         if (!retries) config.optimizer.collision_retries = 0;
+        config.optimizer.stretched_retry = stretched;
         std::string err;
         auto replanner = TopoReplanner::create(config, &err);
         ASSERT_TRUE(replanner) << err;
@@ -375,8 +378,10 @@ TEST(TopoReplanner, GoalsBesideObstaclesAreReachedOnTheFinalApproach) {
   }
   EXPECT_GE(failures[1], 3) << "the wall cases fail without guide timing and retries";
   EXPECT_LT(failures[2], failures[1]) << "the collision retries rescue some";
-  std::printf("goals beside obstacles: failures %d (as configured), %d (no guide timing, no retries), %d (no guide timing)\n",
-              failures[0], failures[1], failures[2]);
+  EXPECT_LT(failures[3], failures[1]) << "the stretched retry rescues some";
+  std::printf("goals beside obstacles: failures %d (as configured), %d (no guide timing, no retries), %d (collision "
+              "retries only), %d (stretched retry only)\n",
+              failures[0], failures[1], failures[2], failures[3]);
 }
 
 }  // namespace

@@ -119,6 +119,14 @@ class PathGuidedOptimizer {
     int collision_retries = 2;             ///< extra refine runs at most (0 = the paper's single run)
     double collision_retry_factor = 4.0;   ///< l2c multiplier per extra run (>= 1)
     double collision_retry_d0_step_m = 0.1;  ///< d0_m increase per extra run [m]
+    /// Before those: when the refined curve collides and the guide phase's spline breaks the
+    /// refine's limits (a detour, or a sharp turn into an opening, flown in the reference segment's
+    /// time), refine again from that spline with its time stretched to the limits, then time the
+    /// result as tightly as the limits allow (never faster than the segment). Refined in the
+    /// segment's time, the feasibility cost outweighs the collision cost of a thin wall, whose two
+    /// sides the control points straddle, and pulls the curve through it (a wall beside the window
+    /// the guide goes through). The stretch is part of stats.time_ratio. false: the paper's PGO.
+    bool stretched_retry = true;
     // GTO with random restarts: restart r > 0 starts from the initial spline plus a smooth lateral
     // bump (zero at the fixed ends) and per-point noise.
     double restart_offset_m = 1.5;  ///< largest bump, uniform in [0, this], perpendicular to start-goal [m]
@@ -144,8 +152,9 @@ class PathGuidedOptimizer {
   /// Time reallocation and final check of a spline (status, costs and stats filled).
   OptimizationResult check(const UniformBspline& spline, const EsdfMap& map) const;
 
-  /// PGO: phase 1, phase 2, time reallocation, final check (phase 2 again, up to
-  /// collision_retries times, while the check finds a collision).
+  /// PGO: phase 1, phase 2, time reallocation, final check (phase 2 again while the check finds a
+  /// collision: from the stretched guide-phase spline (stretched_retry), then up to
+  /// collision_retries times from where it ended).
   OptimizationResult optimize(const UniformBspline& initial, const Path& guide, const EsdfMap& map) const;
   /// Baseline GTO: phase 2 from the initial spline, time reallocation, final check.
   OptimizationResult gto(const UniformBspline& initial, const EsdfMap& map) const;

@@ -19,6 +19,9 @@ class GridAStar {
     double clearance_m = 0.3;        ///< [m]
     bool unknown_is_free = true;
     double search_margin_m = 3.0;    ///< the search box is the start-goal box plus this on each side [m]
+    /// A box that holds no way (kNoPath: a wall whose opening lies farther aside) is searched again
+    /// with the margin doubled, up to this many times (each with the full expansion budget).
+    int margin_doublings = 0;
     int max_expansions = 400000;     ///< budget
     double min_z_m = -1e9;           ///< height band (a geofence): the box keeps to it, and to start and goal [m]
     double max_z_m = 1e9;
@@ -33,6 +36,8 @@ class GridAStar {
   Result search(const EsdfMap& map, const Eigen::Vector3d& start, const Eigen::Vector3d& goal);
 
  private:
+  Result searchBox(const EsdfMap& map, const Eigen::Vector3d& start, const Eigen::Vector3d& goal, double margin_m);
+
   Config config_;
   std::vector<float> g_;
   std::vector<int32_t> parent_;

@@ -109,6 +109,7 @@ class PlannerServer {
 
   ros::Subscriber odom_sub_, goal_sub_, waypoints_sub_, position_cmd_sub_;
   uint64_t session_ = 0;  // random per process: trajectory ordering survives a restart
+  int failed_plan_dumps_ = 0;  // problems saved by debug/dump_failed_plans_dir (planning thread only)
   ros::Publisher heartbeat_pub_;
   ros::Publisher tick_done_pub_;  // ~tick_done: each planning tick finished, stamped with its time
   int time_jumps_logged_ = 0;  // safety thread only

@@ -22,6 +22,11 @@ struct PlannerSettings {
   /// Forget the map when the odometry jumps (the FSM holds, then replans in the space seen anew).
   bool clear_map_on_odom_jump = true;
   double reference_speed_ratio = 0.75;  ///< the reference's limits / the optimiser's (reference/speed_ratio)
+  /// Diagnostics: every failed replanning problem (map and request) is saved in this directory for
+  /// replay_plan (plan_problem_io.h), up to max_failed_plan_dumps of them; empty: off (debug/...).
+  std::string dump_failed_plans_dir;
+  int max_failed_plan_dumps = 200;
+  static constexpr int kMaxFailedPlanDumps = 100000;
 
   /// Smallest vis_sample_s: the markers sample a trajectory at T / vis_sample_s points (capped), a
   /// tiny step only overflows that count.

@@ -352,6 +352,13 @@ class ReplanFsm {
   /// is the clock: a plan that finishes after its takeover time (t + takeover_delay_s) is
   /// discarded rather than published late.
   FsmOutput tick(double t, const EsdfMap& map, const std::function<double()>& now = {});
+  /// Called by tick() after every replanning call, on the planning thread, outside the FSM's lock,
+  /// with the map the plan was made on and what the replanner returned (before the known-space cut):
+  /// a diagnostics hook (the planner node saves failed problems with it). Set it before ticking.
+  /// The replanner's config the FSM plans with: config.replanner within the route's height band.
+  static TopoReplanner::Config replannerConfig(const Config& config);
+  using PlanObserver = std::function<void(const EsdfMap&, const ReplanRequest&, const ReplanResult&)>;
+  void setPlanObserver(PlanObserver observer) { plan_observer_ = std::move(observer); }
   /// The safety thread: checks the executing trajectory from t; flags a replan when it collides,
   /// and returns a braking trajectory when the collision is too close to wait for one.
   FsmOutput checkSafety(double t, const EsdfMap& map);
@@ -451,6 +458,7 @@ class ReplanFsm {
   Config config_;
   std::optional<Config> pending_config_;  // reconfigure(): applied at the next tick
   std::unique_ptr<TopoReplanner> replanner_;  // used by tick() only, outside the lock
+  PlanObserver plan_observer_;                // tick() only, outside the lock
 
   mutable std::mutex mutex_;
   FsmState state_ = FsmState::kInit;

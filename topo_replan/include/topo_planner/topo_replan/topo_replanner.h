@@ -99,6 +99,12 @@ struct ReplanCandidate {
   bool start_repaired = false;          ///< its start velocity was restored after time reallocation
   double start_velocity_step_mps = 0.0; ///< what remains of the start velocity's change [m/s]
   std::string repair_note;              ///< why the start could not be restored (for the logs)
+  /// The guide was long enough for a second try from a spline along it (initialAlong) after the
+  /// first failed; `result` is then the better of the two (passed, else the larger clearance), and
+  /// these say how the first, from the reference segment's timing, ended.
+  bool retried_along = false;
+  OptimizationStatus first_status = OptimizationStatus::kSuccess;
+  double first_min_clearance_m = 0.0;
 };
 
 struct ReplanStats {

@@ -1,0 +1,227 @@
+// Saved replanning problems (plan_problem_io.h): the round trip, malformed files, and two problems
+// the flight benchmark saved when plans failed at a wall (test/data/plans, recorded by this
+// project's `bench_flight.py --dump-failed-plans`, windows world, ideal sensing, seed 1), replayed
+// with the planner's settings (config/planner.yaml) on count budgets.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <fstream>
+#include <random>
+#include <string>
+#include <unistd.h>
+
+#include "topo_planner/path_searching/grid_astar.h"
+#include "topo_planner/plan_env/synthetic_scene.h"
+#include "topo_planner/topo_replan/plan_problem_io.h"
+#include "topo_planner/topo_replan/topo_replanner.h"
+
+namespace topo_planner {
+namespace {
+
+const std::string kPlans = std::string(TOPO_PLANNER_TEST_DATA_DIR) + "/plans/";
+
+std::string tempBase(const char* name) {
+  return "/tmp/topo_planner_test_plan_problem_" + std::to_string(::getpid()) + "_" + name;
+}
+
+// config/planner.yaml's replanner (max_vel 3, the route's height band 0.3-3 m), with the wall-clock
+// budgets replaced by counts.
+TopoReplanner::Config plannerYaml() {
+  TopoReplanner::Config c;
+  c.horizon_m = 7.0;
+  c.reference_clearance_m = 0.3;
+  c.local_goal_margin_m = 2.0;
+  c.max_local_goal_extension_m = 5.0;
+  c.control_point_spacing_m = 0.35;
+  c.guide_timing_ratio = 1.15;
+  c.max_search_start_offset_m = 0.3;
+  c.num_threads = 2;
+  c.search.clearance_m = c.astar.clearance_m = 0.3;
+  c.search.max_paths = 5;
+  c.search.max_length_ratio = 2.0;
+  c.search.roadmap.max_time_s = 0.0;
+  c.search.unknown_is_free = c.astar.unknown_is_free = c.optimizer.unknown_is_free = true;
+  c.astar.margin_doublings = 2;
+  c.optimizer.clearance_m = 0.25;
+  c.optimizer.max_iterations = 200;
+  c.optimizer.max_time_s = 0.0;
+  c.optimizer.l2c = 10.0;
+  c.optimizer.feasibility_margin = 0.8;
+  c.optimizer.max_vel_mps = 3.0;
+  c.optimizer.max_acc_mps2 = 2.5;
+  c.search.roadmap.min_z_m = c.astar.min_z_m = c.optimizer.min_z_m = 0.3;
+  c.search.roadmap.max_z_m = c.astar.max_z_m = c.optimizer.max_z_m = 3.0;
+  return c;
+}
+
+TEST(PlanProblem, RoundTripKeepsTheMapAndTheRequest) {
+  SyntheticScene scene({8.0, 6.0, 3.0}, 0.1, {-1.0, -2.0, 0.0});
+  scene.pillar(3.0, 1.0, 0.4);
+  scene.fill([](const Eigen::Vector3d& p) { return p.x() > 5.5; }, VoxelState::kUnknown);
+  const EsdfMap& map = scene.finish();
+  PolynomialTrajectory reference;
+  ASSERT_EQ(referenceTrajectory({{0.0, 1.0, 1.0}, {3.0, 2.5, 1.2}, {6.0, 1.0, 1.0}}, FlatState::atRest({0.0, 1.0, 1.0}),
+                                FlatState::atRest({6.0, 1.0, 1.0}), ReferenceConfig(), &reference),
+            TrajectoryStatus::kSuccess);
+  ReplanRequest request;
+  request.reference = &reference;
+  request.start = reference.state(0.7);
+  request.reference_time_s = 0.7;
+  request.attempt = 3;
+  const std::string base = tempBase("round_trip");
+  std::string why;
+  ASSERT_TRUE(savePlanProblem(base, map, request, "a note\nover two lines", &why)) << why;
+
+  PlanProblem loaded;
+  ASSERT_TRUE(loadPlanProblem(base + ".problem", &loaded, &why)) << why;
+  EXPECT_EQ(loaded.note, "a note over two lines");
+  EXPECT_EQ(loaded.request.reference, &loaded.reference);
+  EXPECT_EQ(loaded.request.attempt, 3u);
+  EXPECT_EQ(loaded.request.reference_time_s, 0.7);
+  EXPECT_EQ(loaded.request.start.position, request.start.position);
+  EXPECT_EQ(loaded.request.start.velocity, request.start.velocity);
+  EXPECT_EQ(loaded.request.start.acceleration, request.start.acceleration);
+  EXPECT_EQ(loaded.request.start.jerk, request.start.jerk);
+  ASSERT_EQ(loaded.reference.segments().size(), reference.segments().size());
+  for (size_t i = 0; i < reference.segments().size(); ++i) {
+    EXPECT_EQ(loaded.reference.segments()[i].duration, reference.segments()[i].duration);
+    EXPECT_EQ(loaded.reference.segments()[i].coefficients, reference.segments()[i].coefficients);
+  }
+  // The same window, the same voxel states (unknown stays unknown) and the same distances.
+  const GridGeometry& a = map.geometry();
+  const GridGeometry& b = loaded.esdf->geometry();
+  EXPECT_EQ(a.originIndex(), b.originIndex());
+  EXPECT_EQ(a.size(), b.size());
+  EXPECT_EQ(a.resolution(), b.resolution());
+  const VoxelBox w = a.windowBox();
+  Eigen::Vector3i i;
+  for (i.z() = w.min.z(); i.z() <= w.max.z(); ++i.z())
+    for (i.y() = w.min.y(); i.y() <= w.max.y(); ++i.y())
+      for (i.x() = w.min.x(); i.x() <= w.max.x(); ++i.x()) {
+        ASSERT_EQ(map.occupancy().state(i), loaded.occupancy->state(i)) << i.transpose();
+        float da = 0.0f, db = 0.0f;
+        ASSERT_TRUE(map.voxelDistance(i, &da) && loaded.esdf->voxelDistance(i, &db));
+        ASSERT_EQ(da, db) << i.transpose();
+      }
+  std::remove((base + ".problem").c_str());
+  std::remove((base + ".bt").c_str());
+}
+
+TEST(PlanProblem, MalformedFilesAreRefusedWithAReason) {
+  const std::string good = kPlans + "wall_beside_window";
+  std::ifstream in(good + ".problem");
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_FALSE(text.empty());
+  auto replace = [&](const std::string& from, const std::string& to) {
+    std::string s = text;
+    const size_t at = s.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    if (at != std::string::npos) s.replace(at, from.size(), to);
+    return s;
+  };
+  const std::string bt = [&] {
+    std::ifstream f(good + ".bt", std::ios::binary);
+    return std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  }();
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"empty", ""},
+      {"magic", replace("topo_planner_plan_problem 1", "topo_planner_plan_problem 2")},
+      {"nan", replace("resolution_m 0.10000000000000001", "resolution_m nan")},
+      {"short start", replace("start -9.1714869240010835 ", "start ")},
+      {"unknown key", text + "colour blue\n"},
+      {"trailing number", replace("attempt 0", "attempt 0 7")},
+      {"negative size", replace("window_size_voxels 400", "window_size_voxels -400")},
+      {"huge window", replace("window_size_voxels 400 200 34", "window_size_voxels 1000000 1000000 1000000")},
+      {"too many segments", replace("segments 11", "segments 2001")},
+      {"too long", replace("segment 2.5189940635951626", "segment 3600")},
+      {"fewer segments", replace("segments 11", "segments 12")},
+      {"more segments", replace("segments 11", "segments 10")},
+      {"zero duration", replace("segment 2.5189940635951626", "segment 0")},
+  };
+  for (const auto& [name, body] : cases) {
+    const std::string base = tempBase("malformed");
+    std::ofstream(base + ".problem") << body;
+    std::ofstream(base + ".bt", std::ios::binary) << bt;
+    PlanProblem p;
+    std::string why;
+    EXPECT_FALSE(loadPlanProblem(base, &p, &why)) << name;
+    EXPECT_FALSE(why.empty()) << name;
+    std::remove((base + ".problem").c_str());
+    std::remove((base + ".bt").c_str());
+  }
+  PlanProblem p;
+  std::string why;
+  EXPECT_FALSE(loadPlanProblem(tempBase("missing"), &p, &why));
+  EXPECT_NE(why.find("cannot open"), std::string::npos) << why;
+  // A problem whose map file is missing or not an OctoMap.
+  const std::string base = tempBase("no_map");
+  std::ofstream(base + ".problem") << text;
+  EXPECT_FALSE(loadPlanProblem(base, &p, &why));
+  std::ofstream(base + ".bt", std::ios::binary) << "not an octree";
+  EXPECT_FALSE(loadPlanProblem(base, &p, &why));
+  std::remove((base + ".problem").c_str());
+  std::remove((base + ".bt").c_str());
+}
+
+// In flight at x = -9.2, 0.9 m/s, with a wall (one voxel thick as seen) 2 m ahead and its window
+// 2 m aside: every candidate failed in collision, cut through the wall. The guide goes through the
+// window; refined in the reference segment's time the curve is pulled through the wall; the
+// stretched retry (PathGuidedOptimizer::Config::stretched_retry) keeps it in the window.
+TEST(PlanProblem, AFlightsWallFailureIsFixedByTheStretchedRetry) {
+  PlanProblem problem;
+  std::string why;
+  ASSERT_TRUE(loadPlanProblem(kPlans + "wall_beside_window", &problem, &why)) << why;
+  EXPECT_NE(problem.note.find("in collision"), std::string::npos) << problem.note;
+
+  TopoReplanner::Config paper = plannerYaml();
+  paper.optimizer.stretched_retry = false;
+  const ReplanResult before = TopoReplanner::create(paper, &why)->replan(*problem.esdf, problem.request);
+  EXPECT_EQ(before.status, ReplanStatus::kOptimizationFailed) << before.message;
+  ASSERT_FALSE(before.candidates.empty());
+  for (const ReplanCandidate& c : before.candidates) {
+    EXPECT_EQ(c.result.status, OptimizationStatus::kInCollision);
+    EXPECT_LT(c.result.stats.min_clearance_m, 0.0);  // inside the wall
+  }
+
+  const TopoReplanner::Config config = plannerYaml();
+  const std::unique_ptr<TopoReplanner> replanner = TopoReplanner::create(config, &why);
+  const ReplanResult after = replanner->replan(*problem.esdf, problem.request);
+  ASSERT_EQ(after.status, ReplanStatus::kSuccess) << after.message;
+  // Checked again on its own: clear of the wall, within the limits, from the start state.
+  PathGuidedOptimizer::Config check = config.optimizer;
+  check.reallocate_time = false;
+  const OptimizationResult checked = PathGuidedOptimizer(check).check(after.trajectory, *problem.esdf);
+  EXPECT_EQ(checked.status, OptimizationStatus::kSuccess) << checked.message;
+  EXPECT_GE(checked.stats.min_clearance_m, config.optimizer.clearance_m);
+  EXPECT_LT((after.trajectory.evaluate(0.0) - problem.request.start.position).norm(), 1e-6);
+  EXPECT_LE(after.stats.start_velocity_jump_mps, config.max_start_velocity_step_mps);
+}
+
+// The wall's windows lie outside the A* fallback's box (start-goal + 3 m): no way in it. With the
+// margin doubled the box holds one.
+TEST(PlanProblem, TheAStarBoxGrowsToAWindowFartherAside) {
+  PlanProblem problem;
+  std::string why;
+  ASSERT_TRUE(loadPlanProblem(kPlans + "window_outside_the_box", &problem, &why)) << why;
+  const TopoReplanner::Config config = plannerYaml();
+  const LocalProblem lp = TopoReplanner::create(config, &why)->localProblem(*problem.esdf, problem.request);
+  ASSERT_EQ(lp.status, ReplanStatus::kSuccess) << lp.message;
+  GridAStar::Config fixed = config.astar;
+  fixed.margin_doublings = 0;
+  GridAStar box3(fixed);
+  EXPECT_EQ(box3.search(*problem.esdf, lp.search_start, lp.goal).status, SearchStatus::kNoPath);
+  GridAStar grown(config.astar);
+  const GridAStar::Result r = grown.search(*problem.esdf, lp.search_start, lp.goal);
+  ASSERT_EQ(r.status, SearchStatus::kSuccess);
+  const VisibilityChecker free_at(*problem.esdf, config.astar.clearance_m, true);
+  for (const Eigen::Vector3d& p : r.path) EXPECT_TRUE(free_at.isFree(p)) << p.transpose();
+  // It goes round: beyond the 3 m box somewhere.
+  double farthest = 0.0;
+  const Eigen::Vector3d lo = lp.search_start.cwiseMin(lp.goal), hi = lp.search_start.cwiseMax(lp.goal);
+  for (const Eigen::Vector3d& p : r.path)
+    farthest = std::max(farthest, (p - p.cwiseMax(lo).cwiseMin(hi)).head<2>().norm());
+  EXPECT_GT(farthest, 3.0);
+}
+
+}  // namespace
+}  // namespace topo_planner
