@@ -1389,8 +1389,17 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
   lock->unlock();
   ReplanResult result = replanner_->replan(map, request);
   const double finished = now ? now() : t;
-  if (plan_observer_) plan_observer_(map, request, result);
   lock->lock();
+  // The plan handed on at the end of this call, after the observer saw what the FSM made of it (its
+  // start-velocity and known-space checks) outside the lock: the tick ends there.
+  auto conclude = [&] {
+    if (plan_observer_) {
+      lock->unlock();
+      plan_observer_(map, request, result);
+      lock->lock();
+    }
+    out->plan = std::move(result);
+  };
 
   // The known-space commitment of a successful plan (on the map it was planned on).
   ExecTrajectory traj;
@@ -1458,7 +1467,7 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
       event.fallback = "give_up";
       event.message += (event.message.empty() ? "" : "; ") + out->event->message;
       out->event = event;
-      out->plan = std::move(result);
+      conclude();
       return;
     }
     if (backoff) {
@@ -1474,7 +1483,7 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
                        std::to_string(config_.max_look_holds) + " times; " + backoff_report;
       startManoeuvreLocked(*backoff, true, &event, out, backoff_report);
       out->event = event;
-      out->plan = std::move(result);
+      conclude();
       return;
     }
     replaceCurrentLocked(traj);
@@ -1571,7 +1580,7 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
     }
   }
   out->event = event;
-  out->plan = std::move(result);
+  conclude();
 }
 
 FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<double()>& now) {

@@ -306,6 +306,36 @@ TEST(ReplanFsm, ReplansWhenAnObstacleIsRevealedAhead) {
   EXPECT_GT(log.min_clearance, 0.2);
 }
 
+// The plan observer (the planner node saves failed problems with it, debug/dump_failed_plans_dir)
+// sees every replanning call once, as the FSM judged it: the status of its event, the request it
+// planned from. A wall closes the corridor, so plans fail before the vehicle stops.
+TEST(ReplanFsm, ThePlanObserverSeesEveryPlanAsTheFsmJudgedIt) {
+  Corridor before, after;
+  after.scene.box({11.0, -1.0, -1.0}, {11.4, 9.0, 4.0});
+  const EsdfMap& unknown = before.scene.finish();
+  const EsdfMap& revealed = after.scene.finish();
+  ReplanFsm::Config config = testConfig();
+  config.max_plan_failures = 5;
+  config.global_route = false;
+  auto fsm = makeFsm(config);
+  std::vector<ReplanStatus> observed;
+  int without_reference = 0;
+  fsm->setPlanObserver([&](const EsdfMap&, const ReplanRequest& request, const ReplanResult& result) {
+    observed.push_back(result.status);
+    without_reference += !request.reference || request.reference->empty() || !request.start.allFinite();
+  });
+  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}},
+                            [&](double, const Eigen::Vector3d& p) -> const EsdfMap& { return p.x() < 5.0 ? unknown : revealed; },
+                            600, revealed);
+  std::vector<ReplanStatus> planned;  // the events of replanning calls (the others ran no replanner)
+  for (const FsmEvent& e : log.events)
+    if (e.stats.total_ms > 0.0) planned.push_back(e.status);
+  EXPECT_EQ(observed, planned);
+  EXPECT_EQ(without_reference, 0);
+  EXPECT_GE(std::count_if(observed.begin(), observed.end(), [](ReplanStatus s) { return s != ReplanStatus::kSuccess; }), 2);
+  EXPECT_GE(std::count(observed.begin(), observed.end(), ReplanStatus::kSuccess), 2);
+}
+
 // A wall closes the whole corridor. With the global route (the default), the route search proves
 // the goal unreachable as soon as the wall is seen: the FSM brakes and gives the mission up at
 // once, saying why. Without it, it tries max_plan_failures times from rest first.

@@ -353,8 +353,10 @@ class ReplanFsm {
   /// discarded rather than published late.
   FsmOutput tick(double t, const EsdfMap& map, const std::function<double()>& now = {});
   /// Called by tick() after every replanning call, on the planning thread, outside the FSM's lock,
-  /// with the map the plan was made on and what the replanner returned (before the known-space cut):
-  /// a diagnostics hook (the planner node saves failed problems with it). Set it before ticking.
+  /// with the map the plan was made on, the request and the result as the FSM judged it (a plan it
+  /// refused, for its start velocity or the known-space commitment, is kOptimizationFailed with the
+  /// reason): a diagnostics hook (the planner node saves failed problems with it). Set it before
+  /// ticking.
   /// The replanner's config the FSM plans with: config.replanner within the route's height band.
   static TopoReplanner::Config replannerConfig(const Config& config);
   using PlanObserver = std::function<void(const EsdfMap&, const ReplanRequest&, const ReplanResult&)>;
