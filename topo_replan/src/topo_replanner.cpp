@@ -206,7 +206,17 @@ LocalProblem TopoReplanner::localProblem(const EsdfMap& map, const ReplanRequest
     ref_arc += (p - prev_ref).norm();
     prev = prev_ref = p;
   }
-  const int segments = std::max(4, int(std::ceil(seg_arc / config_.control_point_spacing_m)));
+  // The fit is a dense least-squares system over the control points: a local segment of more than
+  // kMaxInitialSegments control point spacings is no local problem but a reference that moves
+  // absurdly fast (found by the plan_problem fuzzer: 1e5 points, a minute in the fit).
+  const double wanted = std::ceil(seg_arc / config_.control_point_spacing_m);
+  if (!(wanted <= kMaxInitialSegments)) {
+    char text[160];
+    std::snprintf(text, sizeof(text), "the local segment is %.3g m long (more than %d control points): the reference moves too fast",
+                  seg_arc, kMaxInitialSegments);
+    return fail(ReplanStatus::kInvalidInput, text);
+  }
+  const int segments = std::max(4, int(wanted));
   const double ref_step = (t_g - t0) / segments;
   const double interval = ref_step * (ref_arc > 1e-3 ? std::max(1.0, seg_arc / ref_arc) : 1.0);
   if (!(interval > 1e-4)) return fail(ReplanStatus::kInvalidInput, "the local segment is too short to replan");

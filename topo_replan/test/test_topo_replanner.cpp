@@ -132,6 +132,24 @@ TEST(TopoReplanner, BadInputsGetTheirStatus) {
   req.start = leaving.state(0.0);
   EXPECT_EQ(replanner->replan(map, req).status, ReplanStatus::kGoalOutOfMap);
 
+  // A reference that leaves the map and comes back within one 10 ms step of the check: its local
+  // segment is 2e5 m long, no local problem (the plan_problem fuzzer's input spent a minute fitting
+  // 1e5 points before kMaxInitialSegments).
+  PolynomialTrajectory::Segment out_and_back, on;
+  out_and_back.duration = 0.02;
+  out_and_back.coefficients.row(0) << 1.0, 4.0, 1.5;
+  out_and_back.coefficients.row(1) << 1.0 + 4e5, 0.0, 0.0;
+  out_and_back.coefficients.row(2) << -4e5, 0.0, 0.0;
+  on.duration = 4.0;
+  on.coefficients.row(0) << 2.0, 4.0, 1.5;
+  on.coefficients.row(1) << 7.0, 0.0, 0.0;
+  const PolynomialTrajectory absurd({out_and_back, on});
+  req.reference = &absurd;
+  req.start = FlatState::atRest({1.0, 4.0, 1.5});
+  const ReplanResult too_fast = replanner->replan(map, req);
+  EXPECT_EQ(too_fast.status, ReplanStatus::kInvalidInput);
+  EXPECT_NE(too_fast.message.find("moves too fast"), std::string::npos) << too_fast.message;
+
   TopoReplanner::Config bad = deterministicConfig(2);
   bad.horizon_m = -1.0;
   EXPECT_FALSE(TopoReplanner::create(bad, &err));

@@ -138,6 +138,11 @@ struct ReplanResult {
 
 class TopoReplanner {
  public:
+  /// Most control point spacings of a local segment (the initial spline's fit is dense in them):
+  /// 1000 x 0.35 m is 50 times the horizon; a longer one is a reference moving absurdly fast
+  /// (kInvalidInput).
+  static constexpr int kMaxInitialSegments = 1000;
+
   struct Config {
     TopoPathSearch::Config search;        ///< guide paths (Sect. IV)
     PathGuidedOptimizer::Config optimizer;  ///< PGO (Sect. III); its clearance_m is the final check's
