@@ -26,7 +26,13 @@ LOG=$WORK/install.log
 
 # Runs a command in a clean environment with only the install space sourced.
 in_install() {
-  env -i HOME="$HOME" PATH=/usr/local/bin:/usr/bin:/bin LANG=C.UTF-8 bash -c "source '$PREFIX/setup.bash' && $1"
+  # A clean environment, but for the sanitizer runs' options (their log_path: a report of a node
+  # flown from the install space counts like any other).
+  local keep=() v
+  for v in ASAN_OPTIONS UBSAN_OPTIONS TSAN_OPTIONS LSAN_OPTIONS TOPO_PLANNER_BUDGET_SCALE; do
+    [ -n "${!v:-}" ] && keep+=("$v=${!v}")
+  done
+  env -i HOME="$HOME" PATH=/usr/local/bin:/usr/bin:/bin LANG=C.UTF-8 "${keep[@]}" bash -c "source '$PREFIX/setup.bash' && $1"
 }
 
 if [ -z "$PREFIX" ]; then
@@ -65,11 +71,14 @@ if [ "${status[install]}" = pass ]; then
   fi
 
   # A short mission (12 m through the seeded medium forest), headless, simulated time at half real
-  # time, its own master. The monitor is required: it ends the launch when the flight is over.
+  # time, its own master. The monitor is required: it ends the launch when the flight is over. The
+  # 300 s hang guard stretches with TOPO_PLANNER_TIME_LIMIT_SCALE (the sanitizer runs: under TSan the
+  # flight, in lockstep, outlasted 300 s of wall time).
+  limit_s=$(awk -v s="${TOPO_PLANNER_TIME_LIMIT_SCALE:-1}" 'BEGIN { s = s + 0; if (s < 1) s = 1; printf "%d", 300 * s }')
   rm -f "$WORK/install_flight_report.json"
   port=$(/usr/bin/python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
   in_install "export ROS_MASTER_URI=http://127.0.0.1:$port ROS_HOSTNAME=127.0.0.1 &&
-    timeout --signal=INT --kill-after=20 300 roslaunch -p $port topo_planner simulation.launch rviz:=false \
+    timeout --signal=INT --kill-after=20 $limit_s roslaunch -p $port topo_planner simulation.launch rviz:=false \
       sim_time:=true realtime_factor:=0.5 monitor:=true shutdown_when_done:=true output:=log \
       'goals:=[-3.0, 0.0, 1.0]' goal_timeout:=60 output_dir:='$WORK' name:=install_flight" >>"$LOG" 2>&1
   report=$WORK/install_flight_report.json
