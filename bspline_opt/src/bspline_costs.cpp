@@ -60,7 +60,7 @@ double windowDistance(const GridGeometry& g, const Eigen::Vector3d& p, Eigen::Ve
 }
 
 double collisionCost(const Eigen::MatrixX3d& q, int first, int last, const EsdfMap& map, double d0_m, double weight,
-                     Eigen::MatrixX3d* grad, double min_z_m, double max_z_m) {
+                     Eigen::MatrixX3d* grad, double min_z_m, double max_z_m, double face_offset_m) {
   assert(0 <= first && first <= last && last < q.rows());
   const GridGeometry& g = map.geometry();
   double cost = 0.0;
@@ -72,6 +72,7 @@ double collisionCost(const Eigen::MatrixX3d& q, int first, int last, const EsdfM
     double distance = windowDistance(g, p, &gradient);
     if (p.z() - min_z_m < distance) distance = p.z() - min_z_m, gradient = Eigen::Vector3d::UnitZ();
     if (max_z_m - p.z() < distance) distance = max_z_m - p.z(), gradient = -Eigen::Vector3d::UnitZ();
+    distance += face_offset_m;
     double esdf;
     Eigen::Vector3d esdf_gradient;
     if (distance >= d0_m) {

@@ -69,7 +69,7 @@ struct RefineProblem {
     const PathGuidedOptimizer::Config& c = *config;
     if (g) g->setZero();
     const double s = smoothnessCost(q, first, last, c.l2s, g);
-    const double col = collisionCost(q, first, last, *map, c.d0_m, c.l2c, g, c.min_z_m, c.max_z_m);
+    const double col = collisionCost(q, first, last, *map, c.d0_m, c.l2c, g, c.min_z_m, c.max_z_m, c.face_offset_m);
     const double d = velocityCost(q, dt, c.feasibility_margin * c.max_vel_mps, c.l2d, g) +
                      accelerationCost(q, dt, c.feasibility_margin * c.max_acc_mps2, c.l2d, g);
     if (fs) *fs = s;
@@ -132,6 +132,7 @@ bool PathGuidedOptimizer::Config::validate(std::string* why) const {
   if (collision_retries < 0 || !std::isfinite(collision_retry_factor) || collision_retry_factor < 1.0 ||
       !finiteNonNegative(collision_retry_d0_step_m))
     return fail("collision_retries must be >= 0, collision_retry_factor >= 1, collision_retry_d0_step_m >= 0");
+  if (!finiteNonNegative(face_offset_m)) return fail("face_offset_m must be finite and >= 0");
   if (!finiteNonNegative(restart_offset_m) || !finiteNonNegative(restart_noise_m))
     return fail("restart_offset_m and restart_noise_m must be finite and >= 0");
   return true;
@@ -384,7 +385,8 @@ void PathGuidedOptimizer::finish(const EsdfMap& map, OptimizationResult* result)
   const Eigen::MatrixX3d& q = spline.controlPoints();
   const double dt = spline.knotSpan();
   result->cost.smoothness = smoothnessCost(q, first, last, 0.0, nullptr);
-  result->cost.collision = collisionCost(q, first, last, map, config_.d0_m, 0.0, nullptr, config_.min_z_m, config_.max_z_m);
+  result->cost.collision =
+      collisionCost(q, first, last, map, config_.d0_m, 0.0, nullptr, config_.min_z_m, config_.max_z_m, config_.face_offset_m);
   result->cost.feasibility = velocityCost(q, dt, config_.max_vel_mps, 0.0, nullptr) +
                              accelerationCost(q, dt, config_.max_acc_mps2, 0.0, nullptr);
   result->cost.jerk_integral_m2ps5 = spline.jerkIntegral();

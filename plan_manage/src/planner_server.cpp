@@ -582,6 +582,7 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("optimizer/lambda_collision", p.optimizer.l2c);
   r.read("optimizer/feasibility_margin", p.optimizer.feasibility_margin);
   r.read("optimizer/stretched_retry", p.optimizer.stretched_retry);
+  r.read("optimizer/face_offset_m", p.optimizer.face_offset_m);
   // The planning's wall-clock budgets (the roadmap's sampling time, NLopt's time per run) stretch on
   // a slow machine (sanitizers: the Makefile sets it with TOPO_PLANNER_BUDGET_SCALE); the counts
   // (samples, evaluations) stay as they are. 1 in flight.

@@ -35,9 +35,11 @@ double windowDistance(const GridGeometry& geometry, const Eigen::Vector3d& p, Ei
 /// nothing outside the window is known or checkable (the final check refuses a curve that leaves
 /// it), so a curve near a face (a raised floor, a ceiling, the window's edge) is pushed back inside
 /// instead of failing the final check every time. NaN points contribute nothing. The faces of a
-/// height band [min_z_m, max_z_m] (a geofence the final check enforces) count as obstacles too.
+/// height band [min_z_m, max_z_m] (a geofence the final check enforces) count as obstacles too,
+/// face_offset_m farther than they are: the final check asks an obstacle's clearance of the curve,
+/// none of a face, and with the offset a face pushes no harder than an obstacle at that clearance.
 double collisionCost(const Eigen::MatrixX3d& q, int first, int last, const EsdfMap& map, double d0_m, double weight,
-                     Eigen::MatrixX3d* grad, double min_z_m = -1e9, double max_z_m = 1e9);
+                     Eigen::MatrixX3d* grad, double min_z_m = -1e9, double max_z_m = 1e9, double face_offset_m = 0.0);
 
 /// Velocity feasibility on the derivative control points V_i = (Q_{i+1} - Q_i) / dt, i = 0..N-1:
 /// sum of (||V_i|| - v_max)^2 over the V_i faster than v_max [(m/s)^2]. Every V_i is included

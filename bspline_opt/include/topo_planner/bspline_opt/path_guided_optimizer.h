@@ -110,6 +110,11 @@ class PathGuidedOptimizer {
     /// (by more than 0.05 m) fails the check as leaving the map [m].
     double min_z_m = -1e9;
     double max_z_m = 1e9;
+    /// The collision cost counts the map window's and the band's faces as obstacles this much
+    /// farther than they are (bspline_costs.h): they need no clearance, and at 0 a face within d0_m
+    /// pushes a curve that keeps to a narrow way beside it (a window at the map's edge, a gap above
+    /// the floor) into the obstacles across the way [m]. 0: faces count at their distance.
+    double face_offset_m = 0.0;
     double check_step_m = 0.0;    ///< arc-length step of the collision check [m]; 0 = half a voxel
     bool unknown_is_free = true;  ///< unknown voxels pass the check (replanning in a partial map)
     // PGO's second chance: a refined curve that fails the check in collision (the cost, on control
