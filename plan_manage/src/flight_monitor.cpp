@@ -534,10 +534,12 @@ void FlightMonitor::finishFlight(bool publish) {
     r.replan_ms_p95 = s.replan_ms_p95;
     r.duration_s = s.duration_s;
     r.path_length_m = s.path_length_m;
-    result_pub_.publish(r);
+    // The report first: a subscriber that stops at the result is then likely (not certain: the topics
+    // are separate connections) to have the report too.
     std_msgs::String report;
     report.data = reportJson(s, recorder_.goals(), recorder_.startTime(), reportInfo(), &recorder_);
     report_pub_.publish(report);
+    result_pub_.publish(r);
   }
   // Goals sent but neither reached nor timed out (an interrupted flight) get their line too.
   for (const GoalRecord& g : recorder_.goals())

@@ -401,6 +401,13 @@ TEST(HostileTraffic, TheFlightGoesOnAndTheMapIsUnchanged) {
     } while (ros::ok() && ros::WallTime::now() < deadline && !result && ros::Time::now() < next);
   }
   ASSERT_TRUE(result != nullptr) << "no /flight_monitor/result within " << wall_timeout_s << " s of wall time";
+  // The report comes on its own latched topic: a connection of its own, so it may arrive after the
+  // result (ROS 1 orders messages within a topic only).
+  while (ros::ok() && ros::WallTime::now() < deadline && report.empty()) {
+    ros::spinOnce();
+    ros::WallDuration(0.02).sleep();
+  }
+  ASSERT_FALSE(report.empty()) << "no /flight_monitor/report within " << wall_timeout_s << " s of wall time";
   ROS_INFO("hostile traffic: %d bad messages in %d rounds; flight %s: %u/%u goals, %u collisions", hostile.sent(),
            hostile.rounds(), result->success ? "success" : "FAILURE", result->goals_reached, result->goals_total,
            result->collisions);
