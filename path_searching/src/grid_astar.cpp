@@ -45,9 +45,14 @@ GridAStar::Result GridAStar::searchBox(const EsdfMap& map, const Eigen::Vector3d
   box.extend(s);
   box.extend(e);
   box = box.inflated(margin).intersection(g.windowBox());
-  // The height band, stretched to hold the start and the goal (a take-off from below it).
-  const int band_lo = std::min({s.z(), e.z(), g.indexOf(Eigen::Vector3d(0, 0, std::max(config_.min_z_m, -1e6))).z()});
-  const int band_hi = std::max({s.z(), e.z(), g.indexOf(Eigen::Vector3d(0, 0, std::min(config_.max_z_m, 1e6))).z()});
+  // The height band: the voxels whose centres lie in it (the voxel holding max_z_m reaches half a
+  // voxel above it, over a wall top the camera saw past), stretched to hold the start and the goal
+  // (a take-off from below it).
+  const double half = 0.5 * g.resolution();
+  const int band_lo =
+      std::min({s.z(), e.z(), g.indexOf(Eigen::Vector3d(0, 0, std::max(config_.min_z_m, -1e6) + half)).z()});
+  const int band_hi =
+      std::max({s.z(), e.z(), g.indexOf(Eigen::Vector3d(0, 0, std::min(config_.max_z_m, 1e6) - half)).z()});
   box.min.z() = std::max(box.min.z(), band_lo);
   box.max.z() = std::min(box.max.z(), band_hi);
   const Eigen::Vector3i n = box.size();

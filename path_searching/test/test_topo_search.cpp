@@ -336,5 +336,27 @@ TEST(GridAStar, ReportsNoPathBudgetAndObstacles) {
   EXPECT_EQ(GridAStar(c).search(map, {1, 4, 1.5}, {4, 4, 1.5}).status, SearchStatus::kBudgetExhausted);
 }
 
+// The height band holds the voxels whose centres lie in it. A wall topped at 2.0 m under a band
+// ending at 2.32 m leaves 0.32 m, too little for a clearance of 0.35 m; the voxel holding the band's
+// top (centre 2.35 m, 0.4 m above the wall's top voxel) lies half a voxel outside it, and once let
+// the search over the wall where the optimiser's band face would not (a flight failed 15 times so).
+TEST(GridAStar, KeepsToTheHeightBand) {
+  SyntheticScene scene({10.0, 8.0, 4.0});
+  scene.box({4.8, -1.0, -1.0}, {5.2, 9.0, 2.0});  // a wall with no opening, 2 m high
+  const EsdfMap& map = scene.finish();
+  GridAStar::Config c;
+  c.search_margin_m = 1.0;
+  c.clearance_m = 0.35;
+  c.max_z_m = 2.32;
+  EXPECT_EQ(GridAStar(c).search(map, {1, 4, 1.5}, {9, 4, 1.5}).status, SearchStatus::kNoPath);
+  c.max_z_m = 2.5;  // room over the wall
+  const GridAStar::Result r = GridAStar(c).search(map, {1, 4, 1.5}, {9, 4, 1.5});
+  ASSERT_EQ(r.status, SearchStatus::kSuccess);
+  double top = 0.0;
+  for (const auto& p : r.path) top = std::max(top, p.z());
+  EXPECT_GT(top, 2.3);
+  EXPECT_LE(top, 2.5);
+}
+
 }  // namespace
 }  // namespace topo_planner
