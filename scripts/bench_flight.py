@@ -93,7 +93,7 @@ def run_flight(args, density, seed, out_dir, name=None, goals=None, extra=(), st
     events_path = os.path.join(out_dir, name + '_events.csv')
     if os.path.exists(events_path):
         with open(events_path, newline='') as f:
-            ms = [num(r['total_ms']) for r in csv.DictReader(f)]
+            ms = [num(r['total_ms']) for r in csv.DictReader(f) if r.get('fallback') != 'reroute']
         ms = [m for m in ms if not math.isnan(m)]
     return {'name': name, 'density': density, 'seed': seed, 'rc': rc, 'wall_s': wall, 'report': report,
             'replan_ms': ms, 'goals_total': report['goals_total'] if report else args.goals, 'log': log_path}
@@ -121,7 +121,8 @@ def run_world_flight(args, style, density, sensing, seed, out_dir):
         ms = []
         if os.path.exists(events_path):
             with open(events_path, newline='') as fh:
-                ms = [m for m in (num(r['total_ms']) for r in csv.DictReader(fh)) if not math.isnan(m)]
+                ms = [m for m in (num(r['total_ms']) for r in csv.DictReader(fh) if r.get('fallback') != 'reroute')
+                      if not math.isnan(m)]
         return {'name': name, 'style': style, 'sensing': sensing, 'seed': seed, 'rc': 0, 'wall_s': 0.0, 'report': report,
                 'replan_ms': ms, 'goals_total': report['goals_total'], 'kinds': kinds,
                 'log': os.path.join(out_dir, name + '.log')}
@@ -157,6 +158,8 @@ def aggregate(flights):
         'max_speed_mps': max(max_speeds) if max_speeds else math.nan,
         'replans': sum(f['report']['replans'] for f in flights if f['report']),
         'replan_failures': sum(f['report']['replan_failures'] for f in flights if f['report']),
+        # The FSM's stall re-routes (no progress for fsm/progress_timeout_s): not planning calls.
+        'stalls': sum(f['report'].get('stalls', 0) for f in flights if f['report']),
         'near_goals': sum(k == 'near' for f in flights for k in f.get('kinds', [])),
         'near_reached': sum(1 for f in flights if f['report'] for g, k in zip(f['report'].get('goals', []), f.get('kinds', []))
                             if k == 'near' and g.get('reached')),
@@ -257,19 +260,20 @@ def worlds_suite(args):
     overall = aggregate(flights)
     def table(rows):
         lines = ['| group | flights | goals reached | rate | near goals reached | collisions | failed replans | '
-                 'min clearance [m] | mean speed [m/s] | replan median / p95 [ms] |',
-                 '|---|---|---|---|---|---|---|---|---|---|']
+                 'stalls | min clearance [m] | mean speed [m/s] | replan median / p95 [ms] |',
+                 '|---|---|---|---|---|---|---|---|---|---|---|']
         for label, a in rows:
             lines.append(f"| {label} | {a['flights']} | {a['goals_reached']}/{a['goals_total']} | {fmt(a['goals_reached_rate'], 3)} | "
                          f"{a['near_reached']}/{a['near_goals']} | {a['collisions']} | {a['replan_failures']}/{a['replans'] + a['replan_failures']} "
-                         f"({100 * failed_rate(a):.1f}%) | {fmt(a['min_clearance_m'])} | {fmt(a['mean_speed_mps'])} | "
+                         f"({100 * failed_rate(a):.1f}%) | {a['stalls']} | {fmt(a['min_clearance_m'])} | {fmt(a['mean_speed_mps'])} | "
                          f"{fmt(a['replan_ms_median'], 1)} / {fmt(a['replan_ms_p95'], 1)} |")
         return lines
     md = ['# Closed-loop flight benchmark: kinds of world and sensing', '',
           f'{len(flights)} flights: styles {args.styles}, sensing {args.sensing}, seeds 1..{args.seeds}, max_vel '
           f'{args.max_vel} m/s, {args.goals} goals each (in the open or 0.5-0.8 m beside obstacles, verified reachable '
           f'with the global route on the true map), goal timeout {args.goal_timeout:.0f} s. Failed replans: planning '
-          'calls that published nothing, over all calls.', '', '## Per style and sensing', '']
+          'calls that published nothing, over all calls. Stalls: the FSM found no progress towards the goal for '
+          'fsm/progress_timeout_s and re-routed (not a planning call).', '', '## Per style and sensing', '']
     md += table(groups)
     md += ['', '## Per style', ''] + table(per_style)
     md += ['', '## Per sensing', ''] + table(per_sensing + [('overall', overall)])
@@ -278,7 +282,7 @@ def worlds_suite(args):
     rates += ' ' + ' '.join(f"rate_{se}={a['goals_reached_rate']:.3f}" for se, a in per_sensing)
     near = overall['near_reached'] / overall['near_goals'] if overall['near_goals'] else 0.0
     result = (f"RESULT flights={overall['flights']} goals_reached_rate={overall['goals_reached_rate']:.3f} "
-              f"collisions={overall['collisions']} failed_replan_rate={failed_rate(overall):.3f} "
+              f"collisions={overall['collisions']} failed_replan_rate={failed_rate(overall):.3f} stalls={overall['stalls']} "
               f"mean_speed_mps={fmt(overall['mean_speed_mps'], 2)} near_goals_rate={near:.3f} {rates} "
               f"replan_ms_median={overall['replan_ms_median']:.2f} replan_ms_p95={overall['replan_ms_p95']:.2f}")
     return write_report(args, md, table(per_style + per_sensing + [('overall', overall)]), result)

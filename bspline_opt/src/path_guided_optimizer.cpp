@@ -411,39 +411,47 @@ OptimizationResult PathGuidedOptimizer::optimize(const UniformBspline& initial, 
   OptimizationResult result = refinePhase(warmup.spline, map);
   UniformBspline refined = result.spline;  // before finish() reallocates its time
   if (result.status == OptimizationStatus::kSuccess) finish(map, &result);
+  // The stretched retry's timing: the refined curve as fast as the refine's limits allow, never
+  // faster than the segment's timing (the guide phase's knot span dt0); the stretch counts in
+  // stats.time_ratio.
+  const double margin_vel = config_.feasibility_margin * config_.max_vel_mps,
+               margin_acc = config_.feasibility_margin * config_.max_acc_mps2;
+  const double dt0 = warmup.spline.knotSpan();
+  auto finishStretched = [&](OptimizationResult* r) {
+    UniformBspline& q = r->spline;
+    const double need =
+        std::max(q.maxVelocityPastStart() / margin_vel, std::sqrt(q.maxAccelerationPastStart() / margin_acc));
+    if (std::isfinite(need) && need > 0.0) q.setKnotSpan(std::max(dt0, q.knotSpan() * need));
+    const double stretch = q.knotSpan() / dt0;
+    const double check_ms = r->stats.check_ms;  // finish() sets its own
+    finish(map, r);
+    r->stats.check_ms += check_ms;
+    r->stats.time_ratio *= stretch;
+    if (r->status == OptimizationStatus::kSuccess && r->stats.time_ratio > config_.max_time_ratio) {
+      r->status = OptimizationStatus::kInfeasible;
+      r->message = "time reallocation above max_time_ratio";
+    }
+  };
+  auto addTimes = [](const OptimizationStats& from, OptimizationStats* to) {
+    to->phase2_ms += from.phase2_ms;
+    to->check_ms += from.check_ms;
+    to->iterations += from.iterations;
+    to->runs += from.runs;
+  };
   if (result.status == OptimizationStatus::kInCollision && config_.stretched_retry) {
     // The guide phase's spline timed for the refine's limits (see Config::stretched_retry).
-    const double margin_vel = config_.feasibility_margin * config_.max_vel_mps,
-                 margin_acc = config_.feasibility_margin * config_.max_acc_mps2;
     UniformBspline stretched = warmup.spline;
-    const double dt0 = stretched.knotSpan();
     if (stretched.reallocateTime(margin_vel, margin_acc, true) > 1.0) {
       OptimizationResult again = refinePhase(stretched, map);
+      addTimes(result.stats, &again.stats);
+      if (again.status == OptimizationStatus::kSuccess) finishStretched(&again);
       if (again.status == OptimizationStatus::kSuccess) {
-        // The refined curve is smoother than the guide phase's: as fast as the limits allow, never
-        // faster than the segment's timing.
-        UniformBspline& q = again.spline;
-        const double need = std::max(q.maxVelocityPastStart() / margin_vel, std::sqrt(q.maxAccelerationPastStart() / margin_acc));
-        if (std::isfinite(need) && need > 0.0) q.setKnotSpan(std::max(dt0, q.knotSpan() * need));
-        const double stretch = q.knotSpan() / dt0;
-        finish(map, &again);
-        again.stats.time_ratio *= stretch;
-        if (again.status == OptimizationStatus::kSuccess && again.stats.time_ratio > config_.max_time_ratio) {
-          again.status = OptimizationStatus::kInfeasible;
-          again.message = "time reallocation above max_time_ratio";
-        }
-        again.stats.phase2_ms += result.stats.phase2_ms;
-        again.stats.check_ms += result.stats.check_ms;
-        again.stats.iterations += result.stats.iterations;
-        again.stats.runs += result.stats.runs;
-        if (again.status == OptimizationStatus::kSuccess) {
-          result = std::move(again);
-        } else {  // the collision retries go on from the first refine; the time spent counts
-          result.stats.phase2_ms = again.stats.phase2_ms;
-          result.stats.check_ms = again.stats.check_ms;
-          result.stats.iterations = again.stats.iterations;
-          result.stats.runs = again.stats.runs;
-        }
+        result = std::move(again);
+      } else {  // the collision retries go on from the first refine; the time spent counts
+        result.stats.phase2_ms = again.stats.phase2_ms;
+        result.stats.check_ms = again.stats.check_ms;
+        result.stats.iterations = again.stats.iterations;
+        result.stats.runs = again.stats.runs;
       }
     }
   }
@@ -452,11 +460,13 @@ OptimizationResult PathGuidedOptimizer::optimize(const UniformBspline& initial, 
     stronger.l2c *= config_.collision_retry_factor;
     stronger.d0_m += config_.collision_retry_d0_step_m;
     OptimizationResult again = PathGuidedOptimizer(stronger).refinePhase(refined, map);
-    again.stats.phase2_ms += result.stats.phase2_ms;
-    again.stats.check_ms += result.stats.check_ms;
-    again.stats.iterations += result.stats.iterations;
-    again.stats.runs += result.stats.runs;
-    if (again.status != OptimizationStatus::kSuccess) break;  // NLopt failed: keep the checked result
+    addTimes(result.stats, &again.stats);
+    if (again.status != OptimizationStatus::kSuccess) {  // NLopt failed: keep the checked result; its time counts
+      result.stats.phase2_ms = again.stats.phase2_ms;
+      result.stats.iterations = again.stats.iterations;
+      result.stats.runs = again.stats.runs;
+      break;
+    }
     refined = again.spline;
     const double check_ms = again.stats.check_ms;
     finish(map, &again);  // the check of this optimiser's config (clearance, limits), not the stronger one's

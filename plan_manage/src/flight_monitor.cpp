@@ -390,7 +390,8 @@ void FlightMonitor::replanCallback(const topo_planner::ReplanEventConstPtr& msg)
   r.total_ms = msg->total_ms;
   r.trajectory_id = msg->trajectory_id;
   r.published = msg->trajectory_id >= 0;
-  if (recorder_.started() && !done_) planned_since_goal_ = true;
+  r.stall = msg->fallback == "reroute";
+  if (recorder_.started() && !done_ && !r.stall) planned_since_goal_ = true;
   recorder_.addReplan(std::move(r));
 }
 

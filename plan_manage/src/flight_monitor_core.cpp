@@ -456,7 +456,9 @@ void FlightRecorder::addReplan(ReplanRecord record) {
   if (!flying()) return;
   record.goal_index = active_;
   GoalRecord& goal = goals_[size_t(active_)];
-  if (record.published) {
+  if (record.stall) {
+    ++goal.stalls;
+  } else if (record.published) {
     ++goal.replans;
   } else {
     ++goal.replan_failures;
@@ -511,6 +513,10 @@ FlightSummary FlightRecorder::summary() const {
   std::vector<double> ms;
   ms.reserve(replans_.size());
   for (const ReplanRecord& r : replans_) {
+    if (r.stall) {
+      ++s.stalls;
+      continue;
+    }
     (r.published ? s.replans : s.replan_failures) += 1;
     if (std::isfinite(r.total_ms)) ms.push_back(r.total_ms);
   }
@@ -550,7 +556,7 @@ std::string formatGoalLine(const GoalRecord& goal, int goals_total, double fligh
   }
   l << " at t=" << fmt(end - flight_start_s, 1) << " s after " << fmt(goal.elapsedS(now_s), 1)
     << " s: path " << fmt(goal.path_length_m, 1) << " m, max speed " << fmt(goal.max_speed_mps, 2) << " m/s, "
-    << goal.replans << " replans (" << goal.replan_failures << " failed), min clearance "
+    << goal.replans << " replans (" << goal.replan_failures << " failed), " << goal.stalls << " stalls, min clearance "
     << fmt(goal.min_clearance_m, 2) << " m, collisions " << goal.collisions();
   return l.str();
 }
@@ -569,7 +575,8 @@ std::string formatReport(const FlightSummary& s, const std::string& name) {
             : std::string("n/a (no odometry during the flight)"))
     << "\n"
     << "  speed mean / max     " << fmt(s.mean_speed_mps, 2) << " / " << fmt(s.max_speed_mps, 2) << " m/s\n"
-    << "  replans              " << s.replans << " (" << s.replan_failures << " failed)\n"
+    << "  replans              " << s.replans << " (" << s.replan_failures << " failed), " << s.stalls
+    << " stall re-routes\n"
     << "  replanning time      median " << fmt(s.replan_ms_median, 1) << " ms, p95 " << fmt(s.replan_ms_p95, 1)
     << " ms, max " << fmt(s.replan_ms_max, 1) << " ms\n"
     << "  duration             " << fmt(s.duration_s, 1) << " s, path " << fmt(s.path_length_m, 1) << " m\n"
@@ -682,6 +689,7 @@ std::string reportJson(const FlightSummary& s, const std::vector<GoalRecord>& go
     << "  \"max_speed_mps\": " << jsonNumber(s.max_speed_mps) << ",\n"
     << "  \"replans\": " << s.replans << ",\n"
     << "  \"replan_failures\": " << s.replan_failures << ",\n"
+    << "  \"stalls\": " << s.stalls << ",\n"
     << "  \"replan_ms_median\": " << jsonNumber(s.replan_ms_median) << ",\n"
     << "  \"replan_ms_p95\": " << jsonNumber(s.replan_ms_p95) << ",\n"
     << "  \"replan_ms_max\": " << jsonNumber(s.replan_ms_max) << ",\n"
@@ -718,7 +726,7 @@ std::string reportJson(const FlightSummary& s, const std::vector<GoalRecord>& go
       << ", \"time_s\": " << jsonNumber(g.reached ? g.reached_t_s - g.sent_t_s : std::nan(""))
       << ", \"path_length_m\": " << jsonNumber(g.path_length_m) << ", \"max_speed_mps\": " << jsonNumber(g.max_speed_mps)
       << ", \"min_clearance_m\": " << jsonNumber(g.min_clearance_m) << ", \"distance_m\": " << jsonNumber(g.distance_m)
-      << ", \"replans\": " << g.replans << ", \"replan_failures\": " << g.replan_failures
+      << ", \"replans\": " << g.replans << ", \"replan_failures\": " << g.replan_failures << ", \"stalls\": " << g.stalls
       << ", \"collisions\": " << g.collisions() << "}";
   }
   j << (goals.empty() ? "" : "\n  ") << "]";

@@ -184,7 +184,8 @@ TEST(FlightRecorder, GapsAndBadSamplesAreNotIntegrated) {
   EXPECT_NEAR(s.max_speed_mps, 1.0, 1e-12);
 }
 
-// Percentiles against a sorted copy (nearest rank), counts per goal, and events outside the flight.
+// Percentiles against a sorted copy (nearest rank), counts per goal, stall re-routes apart from the
+// planning calls, and events outside the flight.
 TEST(FlightRecorder, ReplanStatisticsMatchBruteForce) {
   FlightRecorder rec(FlightRecorder::Config(), {Eigen::Vector3d(10, 0, 1), Eigen::Vector3d(20, 0, 1)});
   ReplanRecord before;
@@ -195,7 +196,7 @@ TEST(FlightRecorder, ReplanStatisticsMatchBruteForce) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> ms(0.5, 40.0);
   std::vector<double> all;
-  int published[2] = {0, 0}, failed[2] = {0, 0};
+  int published[2] = {0, 0}, failed[2] = {0, 0}, stalls[2] = {0, 0};
   for (int i = 0; i < 137; ++i) {
     if (i == 60) rec.addOdometry(sample(10.0, Eigen::Vector3d(10, 0, 1), Eigen::Vector3d::Zero()));  // goal 1
     const int goal = i < 60 ? 0 : 1;
@@ -204,11 +205,19 @@ TEST(FlightRecorder, ReplanStatisticsMatchBruteForce) {
     r.total_ms = ms(rng);
     r.published = i % 7 != 3;
     r.trajectory_id = r.published ? i : -1;
-    (r.published ? published : failed)[goal] += 1;
-    all.push_back(r.total_ms);
+    if (i % 11 == 5) {  // a stall re-route: no planning call, its time not a planning time
+      r.stall = true;
+      r.published = false;
+      r.trajectory_id = -1;
+      r.total_ms = 0.0;
+      ++stalls[goal];
+    } else {
+      (r.published ? published : failed)[goal] += 1;
+      all.push_back(r.total_ms);
+    }
     rec.addReplan(r);
   }
-  ASSERT_EQ(rec.replans().size(), all.size());
+  ASSERT_EQ(rec.replans().size(), all.size() + size_t(stalls[0] + stalls[1]));
   EXPECT_EQ(rec.replans()[0].goal_index, 0);
   EXPECT_EQ(rec.replans().back().goal_index, 1);
   std::vector<double> sorted = all;
@@ -224,11 +233,17 @@ TEST(FlightRecorder, ReplanStatisticsMatchBruteForce) {
   EXPECT_EQ(rec.goals()[0].replan_failures, failed[0]);
   EXPECT_EQ(rec.goals()[1].replans, published[1]);
   EXPECT_EQ(rec.goals()[1].replan_failures, failed[1]);
+  EXPECT_GT(stalls[0], 0);
+  EXPECT_GT(stalls[1], 0);
+  EXPECT_EQ(s.stalls, stalls[0] + stalls[1]);
+  EXPECT_EQ(rec.goals()[0].stalls, stalls[0]);
+  EXPECT_EQ(rec.goals()[1].stalls, stalls[1]);
 
+  const size_t recorded = rec.replans().size();
   rec.addOdometry(sample(20.0, Eigen::Vector3d(20, 0, 1), Eigen::Vector3d::Zero()));  // the end
   ASSERT_TRUE(rec.finished());
   rec.addReplan(before);  // after the end: ignored
-  EXPECT_EQ(rec.replans().size(), all.size());
+  EXPECT_EQ(rec.replans().size(), recorded);
 }
 
 TEST(FlightRecorder, NoReplansGiveZeroTimes) {

@@ -54,6 +54,9 @@ struct ReplanRecord {
   std::string message;     ///< the planner's account of the call (why it failed)
   double total_ms = 0.0;   ///< check + search + optimisation [ms]
   bool published = false;  ///< a trajectory came out
+  /// The FSM's stall remedy (fallback "reroute": no progress for fsm/progress_timeout_s), not a
+  /// planning call: counted in stalls, not among the replans or their failures.
+  bool stall = false;
   int64_t trajectory_id = -1;
   int goal_index = -1;     ///< goal active when it arrived (set by the recorder)
 };
@@ -84,6 +87,7 @@ struct GoalRecord {
   double distance_m = std::numeric_limits<double>::quiet_NaN();  ///< body to goal at the latest sample [m]
   int replans = 0;               ///< planning calls that published a trajectory
   int replan_failures = 0;       ///< planning calls that did not
+  int stalls = 0;                ///< stall re-routes of the FSM while it was active
   int sim_collisions = 0;        ///< simulator contacts counted while it was active
   int clearance_contacts = 0;    ///< own-check contacts that began while it was active
   int collisions() const { return sim_collisions > clearance_contacts ? sim_collisions : clearance_contacts; }
@@ -256,6 +260,7 @@ struct FlightSummary {
   double max_speed_mps = 0.0;
   int replans = 0;
   int replan_failures = 0;
+  int stalls = 0;                 ///< stall re-routes (ReplanRecord::stall), not planning calls
   double replan_ms_median = 0.0;  ///< over every planning call of the flight (0 without calls) [ms]
   double replan_ms_p95 = 0.0;
   double replan_ms_max = 0.0;
