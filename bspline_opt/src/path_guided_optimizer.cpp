@@ -15,6 +15,19 @@ namespace topo_planner {
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+// A cubic's first three control points set for a start state at its knot span dt:
+// p = (Q0 + 4 Q1 + Q2) / 6, v = (Q2 - Q0) / (2 dt), a = (Q0 - 2 Q1 + Q2) / dt^2. False (unchanged)
+// for other degrees.
+bool setCubicStart(const Eigen::Vector3d& p, const Eigen::Vector3d& v, const Eigen::Vector3d& a, UniformBspline* s) {
+  if (s->degree() != 3 || s->numControlPoints() < 3) return false;
+  const double dt = s->knotSpan();
+  const Eigen::Vector3d q1 = p - a * dt * dt / 6.0;
+  s->controlPoints().row(0) = (q1 - v * dt + a * dt * dt / 2.0).transpose();
+  s->controlPoints().row(1) = q1.transpose();
+  s->controlPoints().row(2) = (q1 + v * dt + a * dt * dt / 2.0).transpose();
+  return true;
+}
 constexpr double kMaxCheckIntervals = 1e7;  // bound of the final check's curve samples
 double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
@@ -413,24 +426,39 @@ OptimizationResult PathGuidedOptimizer::optimize(const UniformBspline& initial, 
   if (result.status == OptimizationStatus::kSuccess) finish(map, &result);
   // The stretched retry's timing: the refined curve as fast as the refine's limits allow, never
   // faster than the segment's timing (the guide phase's knot span dt0); the stretch counts in
-  // stats.time_ratio.
+  // stats.time_ratio. The start state (the initial spline's, at dt0) is kept: a cubic's first
+  // control points are set anew for each knot span. Re-timed, the refined curve's start is set
+  // anew and the curve checked again; when that fails, it keeps the knot span it was refined at.
   const double margin_vel = config_.feasibility_margin * config_.max_vel_mps,
                margin_acc = config_.feasibility_margin * config_.max_acc_mps2;
   const double dt0 = warmup.spline.knotSpan();
+  const UniformBspline initial_vel = initial.derivative();
+  const Eigen::Vector3d start_p = initial.evaluate(0.0), start_v = initial_vel.evaluate(0.0),
+                        start_a = initial_vel.derivative().evaluate(0.0);
   auto finishStretched = [&](OptimizationResult* r) {
+    const OptimizationResult refined_at = *r;  // before the re-timing
+    double check_ms = r->stats.check_ms;      // finish() sets its own
+    auto finishAt = [&](double stretch) {
+      finish(map, r);
+      r->stats.time_ratio *= stretch;
+      if (r->status == OptimizationStatus::kSuccess && r->stats.time_ratio > config_.max_time_ratio) {
+        r->status = OptimizationStatus::kInfeasible;
+        r->message = "time reallocation above max_time_ratio";
+      }
+    };
     UniformBspline& q = r->spline;
     const double need =
         std::max(q.maxVelocityPastStart() / margin_vel, std::sqrt(q.maxAccelerationPastStart() / margin_acc));
     if (std::isfinite(need) && need > 0.0) q.setKnotSpan(std::max(dt0, q.knotSpan() * need));
-    const double stretch = q.knotSpan() / dt0;
-    const double check_ms = r->stats.check_ms;  // finish() sets its own
-    finish(map, r);
-    r->stats.check_ms += check_ms;
-    r->stats.time_ratio *= stretch;
-    if (r->status == OptimizationStatus::kSuccess && r->stats.time_ratio > config_.max_time_ratio) {
-      r->status = OptimizationStatus::kInfeasible;
-      r->message = "time reallocation above max_time_ratio";
+    const bool retimed = q.knotSpan() != refined_at.spline.knotSpan();
+    if (retimed) setCubicStart(start_p, start_v, start_a, &q);
+    finishAt(q.knotSpan() / dt0);
+    if (retimed && r->status != OptimizationStatus::kSuccess) {  // as refined
+      check_ms += r->stats.check_ms;
+      *r = refined_at;
+      finishAt(r->spline.knotSpan() / dt0);
     }
+    r->stats.check_ms += check_ms;
   };
   auto addTimes = [](const OptimizationStats& from, OptimizationStats* to) {
     to->phase2_ms += from.phase2_ms;
@@ -442,6 +470,7 @@ OptimizationResult PathGuidedOptimizer::optimize(const UniformBspline& initial, 
     // The guide phase's spline timed for the refine's limits (see Config::stretched_retry).
     UniformBspline stretched = warmup.spline;
     if (stretched.reallocateTime(margin_vel, margin_acc, true) > 1.0) {
+      setCubicStart(start_p, start_v, start_a, &stretched);
       OptimizationResult again = refinePhase(stretched, map);
       addTimes(result.stats, &again.stats);
       if (again.status == OptimizationStatus::kSuccess) finishStretched(&again);

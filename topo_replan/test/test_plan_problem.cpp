@@ -277,5 +277,30 @@ TEST(PlanProblem, NoGuideOverAWallAsHighAsTheBand) {
   EXPECT_GE(checked.stats.min_clearance_m, config.optimizer.clearance_m);
 }
 
+// A start moving at 0.8 m/s beside a wall (a windows world, ideal sensing): the way to the window
+// turns back. The stretched retry's curve, refined with the start's first control points as the
+// segment's timing set them, started at a fraction of the vehicle's velocity and cut into the wall
+// (clearance 0.18 m). With the start state set for each knot span the retry plans, and the plan
+// starts with the vehicle's velocity and acceleration.
+TEST(PlanProblem, TheStretchedRetryKeepsAMovingStart) {
+  PlanProblem problem;
+  std::string why;
+  ASSERT_TRUE(loadPlanProblem(kPlans + "turn_back_to_a_window", &problem, &why)) << why;
+  ASSERT_GT(problem.request.start.velocity.norm(), 0.5);
+  const TopoReplanner::Config config = plannerYaml();
+  const ReplanResult plan = TopoReplanner::create(config, &why)->replan(*problem.esdf, problem.request);
+  ASSERT_EQ(plan.status, ReplanStatus::kSuccess) << plan.message;
+  ASSERT_GE(plan.chosen, 0);
+  EXPECT_GT(plan.candidates[size_t(plan.chosen)].result.stats.time_ratio, 1.0);  // stretched
+  const UniformBspline vel = plan.trajectory.derivative();
+  EXPECT_LT((plan.trajectory.evaluate(0.0) - problem.request.start.position).norm(), 1e-6);
+  EXPECT_LT((vel.evaluate(0.0) - problem.request.start.velocity).norm(), 1e-6);
+  EXPECT_LT((vel.derivative().evaluate(0.0) - problem.request.start.acceleration).norm(), 1e-6);
+  PathGuidedOptimizer::Config check = config.optimizer;
+  check.reallocate_time = false;
+  const OptimizationResult checked = PathGuidedOptimizer(check).check(plan.trajectory, *problem.esdf);
+  EXPECT_EQ(checked.status, OptimizationStatus::kSuccess) << checked.message;
+}
+
 }  // namespace
 }  // namespace topo_planner
