@@ -1408,8 +1408,9 @@ TEST(ReplanFsm, FliesOnFromWhereItStoppedAfterAnOdometryJumpClearedTheMap) {
   for (const Eigen::Vector3d& q : log.flown) {
     const Eigen::Vector3d d = q - *rest;
     const bool in_view = d.x() > 0.0 && std::abs(d.z()) <= tan_v * d.x() && std::abs(d.y()) <= tan_h * d.x();
-    if (q.x() > rest->x() - 1e-6 && d.norm() < 1.5 && !in_view)
+    if (q.x() > rest->x() - 1e-6 && d.norm() < 1.5 && !in_view) {
       EXPECT_LE(d.norm(), config.known_start_radius_m + 1e-6) << q.transpose();
+    }
   }
 }
 
