@@ -391,7 +391,7 @@ void FlightMonitor::replanCallback(const topo_planner::ReplanEventConstPtr& msg)
   r.trajectory_id = msg->trajectory_id;
   r.published = msg->trajectory_id >= 0;
   r.stall = msg->fallback == "reroute";
-  if (recorder_.started() && !done_ && !r.stall) planned_since_goal_ = true;
+  if (recorder_.started() && !done_) planned_since_goal_ = true;  // a stall event too: the planner has the goal
   recorder_.addReplan(std::move(r));
 }
 
