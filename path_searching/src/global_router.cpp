@@ -19,6 +19,7 @@ bool GlobalRouter::Config::validate(std::string* why) const {
   if (!(avoid_weight >= 0.0) || !std::isfinite(avoid_weight)) return bad("route avoid_weight must be >= 0");
   if (!(heuristic_weight >= 1.0) || !std::isfinite(heuristic_weight)) return bad("route heuristic_weight must be >= 1");
   if (!(min_z_m < max_z_m)) return bad("route min_z_m must be below max_z_m");
+  if (!(band_margin_m >= 0.0) || !std::isfinite(band_margin_m)) return bad("route band_margin_m must be finite and >= 0");
   if (!(end_radius_m >= 0.0) || !std::isfinite(end_radius_m)) return bad("route end_radius_m must be finite and >= 0");
   if (!(start_radius_m >= 0.0) || !std::isfinite(start_radius_m)) return bad("route start_radius_m must be finite and >= 0");
   if (!(end_clearance_m >= 0.0) || !(end_clearance_m <= clearance_m))
@@ -35,6 +36,19 @@ void GlobalRouter::setAvoided(const std::vector<Zone>& zones) {
 }
 
 GlobalRouter::Result GlobalRouter::route(const EsdfMap& map, const Eigen::Vector3d& start, const Eigen::Vector3d& goal) {
+  const double m = config_.band_margin_m;
+  if (m > 0.0 && config_.max_z_m - config_.min_z_m > 2.0 * m) {
+    const Result inner = search(map, start, goal, config_.min_z_m + m, config_.max_z_m - m);
+    if (inner.status != SearchStatus::kNoPath) return inner;
+    Result whole = search(map, start, goal, config_.min_z_m, config_.max_z_m);
+    whole.expansions += inner.expansions;
+    return whole;
+  }
+  return search(map, start, goal, config_.min_z_m, config_.max_z_m);
+}
+
+GlobalRouter::Result GlobalRouter::search(const EsdfMap& map, const Eigen::Vector3d& start, const Eigen::Vector3d& goal,
+                                          double min_z_m, double max_z_m) {
   Result result;
   if (!start.allFinite() || !goal.allFinite() || !config_.validate(nullptr)) return result;
   const GridGeometry& geo = map.geometry();
@@ -86,7 +100,7 @@ GlobalRouter::Result GlobalRouter::route(const EsdfMap& map, const Eigen::Vector
         if (!map.voxelDistance(v, &d) || d <= best) continue;
         if (!config_.unknown_is_free && occupancy.state(v) == VoxelState::kUnknown) continue;
         const double z = geo.centerOf(v).z();
-        if (!relaxed && (z < config_.min_z_m || z > config_.max_z_m)) continue;
+        if (!relaxed && (z < min_z_m || z > max_z_m)) continue;
         best = d;
         best_offset = uint8_t(o);
       }

@@ -153,6 +153,47 @@ TEST(GlobalRouter, KeepsToTheHeightBand) {
   EXPECT_EQ(fenced.route(map, {2, 4, 1.0}, {22, 4, 1.0}).status, SearchStatus::kNoPath);
 }
 
+TEST(GlobalRouter, KeepsAMarginInsideTheBandWhereItCan) {
+  // A wall as high as the band (3 m) whose top 0.4 m the camera has not seen, and a window in it
+  // 4 m aside. Without the margin the route goes over the wall through the unknown top; with it,
+  // through the window. With the window closed the unknown top is the only way: taken (kNoPath
+  // would claim the goal unreachable).
+  for (const bool window : {true, false}) {
+    SCOPED_TRACE(window ? "window" : "no window");
+    SyntheticScene scene(Eigen::Vector3d(24.0, 12.0, 3.4));
+    scene.box({11.8, -1, -1}, {12.2, 13, 3.0});
+    scene.fill([](const Eigen::Vector3d& p) { return p.x() >= 11.8 && p.x() <= 12.2 && p.z() >= 2.6 && p.z() <= 3.0; },
+               VoxelState::kUnknown);
+    if (window)
+      scene.fill([](const Eigen::Vector3d& p) { return p.x() >= 11.7 && p.x() <= 12.3 && std::abs(p.y() - 10.0) <= 0.6 &&
+                                                      std::abs(p.z() - 1.5) <= 0.6; },
+                 VoxelState::kFree);
+    const EsdfMap& map = scene.finish();
+    GlobalRouter::Config c;
+    c.min_z_m = 0.3;
+    c.max_z_m = 3.0;
+    auto top = [](const GlobalRouter::Result& r) {
+      double z = 0.0;
+      for (const Eigen::Vector3d& p : r.raw) z = std::max(z, p.z());
+      return z;
+    };
+    const GlobalRouter::Result none = GlobalRouter(c).route(map, {2, 6, 1.5}, {22, 6, 1.5});
+    ASSERT_EQ(none.status, SearchStatus::kSuccess);
+    EXPECT_GT(top(none), 2.7);  // over the wall
+    c.band_margin_m = 0.3;
+    const GlobalRouter::Result kept = GlobalRouter(c).route(map, {2, 6, 1.5}, {22, 6, 1.5});
+    ASSERT_EQ(kept.status, SearchStatus::kSuccess);
+    if (window) {
+      EXPECT_LE(top(kept), 2.7 + 1e-9);
+      bool through = false;
+      for (const Eigen::Vector3d& p : kept.raw) through |= std::abs(p.x() - 12.0) < 0.3 && std::abs(p.y() - 10.0) < 0.6;
+      EXPECT_TRUE(through);
+    } else {
+      EXPECT_GT(top(kept), 2.7);
+    }
+  }
+}
+
 TEST(GlobalRouter, RoutesThroughUnknownSpaceOnlyWhenAllowed) {
   // The only way past the wall is a gap of unknown space.
   SyntheticScene scene(Eigen::Vector3d(24.0, 8.0, 3.0));

@@ -535,6 +535,7 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("route/heuristic_weight", f.route.heuristic_weight);
   r.read("route/min_z_m", f.route.min_z_m);
   r.read("route/max_z_m", f.route.max_z_m);
+  r.read("route/band_margin_m", f.route.band_margin_m);
   r.read("route/end_clearance_m", f.route.end_clearance_m);
   r.read("route/max_expansions", f.route.max_expansions);
 

@@ -50,6 +50,12 @@ class GlobalRouter {
     double heuristic_weight = 1.5;         ///< >= 1; 1 is plain A*
     double min_z_m = -1e9;                 ///< height band of the route (geofence) [m]
     double max_z_m = 1e9;
+    /// The route keeps this far inside the band where it can; a route in the margin is searched
+    /// only when none keeps it (so kNoPath still means: none in the band). Under the band's
+    /// ceiling the top of a wall as high as it is seldom in the camera's view: unknown, hence free
+    /// to the route, it made a way over the wall that the vehicle flew to, stopped at and backed
+    /// off from, again and again [m].
+    double band_margin_m = 0.0;
     double end_radius_m = 0.6;             ///< relaxed rules this close to the start and the goal [m]
     double start_radius_m = 0.6;           ///< ... and this close to the start [m] (the larger applies)
     double end_clearance_m = 0.1;          ///< ... down to this clearance [m]
@@ -86,6 +92,10 @@ class GlobalRouter {
   Result route(const EsdfMap& map, const Eigen::Vector3d& start, const Eigen::Vector3d& goal);
 
  private:
+  /// One search with the band [min_z_m, max_z_m].
+  Result search(const EsdfMap& map, const Eigen::Vector3d& start, const Eigen::Vector3d& goal, double min_z_m,
+                double max_z_m);
+
   Config config_;
   std::vector<Zone> avoided_;
   std::vector<float> g_;
