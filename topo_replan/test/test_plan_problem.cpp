@@ -55,6 +55,21 @@ TopoReplanner::Config plannerYaml() {
   return c;
 }
 
+// Plans the problem with the config and checks the plan on its own: it passes the final check (in
+// the map and the band, within the limits) with the optimiser's clearance. Returns the plan.
+ReplanResult expectCheckedPlan(const PlanProblem& problem, const TopoReplanner::Config& config) {
+  std::string why;
+  const ReplanResult plan = TopoReplanner::create(config, &why)->replan(*problem.esdf, problem.request);
+  EXPECT_EQ(plan.status, ReplanStatus::kSuccess) << plan.message;
+  if (plan.status != ReplanStatus::kSuccess) return plan;
+  PathGuidedOptimizer::Config check = config.optimizer;
+  check.reallocate_time = false;
+  const OptimizationResult checked = PathGuidedOptimizer(check).check(plan.trajectory, *problem.esdf);
+  EXPECT_EQ(checked.status, OptimizationStatus::kSuccess) << checked.message;
+  EXPECT_GE(checked.stats.min_clearance_m, config.optimizer.clearance_m);
+  return plan;
+}
+
 TEST(PlanProblem, RoundTripKeepsTheMapAndTheRequest) {
   SyntheticScene scene({8.0, 6.0, 3.0}, 0.1, {-1.0, -2.0, 0.0});
   scene.pillar(3.0, 1.0, 0.4);
@@ -214,14 +229,7 @@ TEST(PlanProblem, AFaceBesideANarrowWayNeedsNoClearance) {
     const ReplanResult before = TopoReplanner::create(at_distance, &why)->replan(*problem.esdf, problem.request);
     EXPECT_EQ(before.status, ReplanStatus::kOptimizationFailed) << before.message;
 
-    const TopoReplanner::Config config = plannerYaml();
-    const ReplanResult after = TopoReplanner::create(config, &why)->replan(*problem.esdf, problem.request);
-    ASSERT_EQ(after.status, ReplanStatus::kSuccess) << after.message;
-    PathGuidedOptimizer::Config check = config.optimizer;
-    check.reallocate_time = false;
-    const OptimizationResult checked = PathGuidedOptimizer(check).check(after.trajectory, *problem.esdf);
-    EXPECT_EQ(checked.status, OptimizationStatus::kSuccess) << checked.message;  // in the map and the band
-    EXPECT_GE(checked.stats.min_clearance_m, config.optimizer.clearance_m);
+    expectCheckedPlan(problem, plannerYaml());
   }
 }
 
@@ -238,14 +246,7 @@ TEST(PlanProblem, TwoFacesBesideAWindowInTheCorner) {
   const ReplanResult failed = TopoReplanner::create(before, &why)->replan(*problem.esdf, problem.request);
   EXPECT_EQ(failed.status, ReplanStatus::kOptimizationFailed) << failed.message;
 
-  const TopoReplanner::Config config = plannerYaml();
-  const ReplanResult plan = TopoReplanner::create(config, &why)->replan(*problem.esdf, problem.request);
-  ASSERT_EQ(plan.status, ReplanStatus::kSuccess) << plan.message;
-  PathGuidedOptimizer::Config check = config.optimizer;
-  check.reallocate_time = false;
-  const OptimizationResult checked = PathGuidedOptimizer(check).check(plan.trajectory, *problem.esdf);
-  EXPECT_EQ(checked.status, OptimizationStatus::kSuccess) << checked.message;  // in the map and the band
-  EXPECT_GE(checked.stats.min_clearance_m, config.optimizer.clearance_m);
+  expectCheckedPlan(problem, plannerYaml());
 }
 
 // The wall's windows lie outside the A* fallback's box (start-goal + 3 m): no way in it. With the
@@ -290,14 +291,7 @@ TEST(PlanProblem, NoGuideOverAWallAsHighAsTheBand) {
   const GridAStar::Result guide = GridAStar(config.astar).search(*problem.esdf, lp.search_start, lp.goal);
   ASSERT_EQ(guide.status, SearchStatus::kSuccess);
   for (const Eigen::Vector3d& p : guide.path) EXPECT_LE(p.z(), config.astar.max_z_m) << p.transpose();
-
-  const ReplanResult plan = TopoReplanner::create(config, &why)->replan(*problem.esdf, problem.request);
-  ASSERT_EQ(plan.status, ReplanStatus::kSuccess) << plan.message;
-  PathGuidedOptimizer::Config check = config.optimizer;
-  check.reallocate_time = false;
-  const OptimizationResult checked = PathGuidedOptimizer(check).check(plan.trajectory, *problem.esdf);
-  EXPECT_EQ(checked.status, OptimizationStatus::kSuccess) << checked.message;
-  EXPECT_GE(checked.stats.min_clearance_m, config.optimizer.clearance_m);
+  expectCheckedPlan(problem, config);
 }
 
 // A start moving at 0.8 m/s beside a wall (a windows world, ideal sensing): the way to the window
