@@ -341,6 +341,7 @@ bool SetpointGenerator::sample(double t, Setpoint* out) {
       dt = step;
     }
   }
+  const double previous_t = t - dt;  // the last sample, in this time base (t itself at the first)
   sampled_ = true;
   last_t_ = t;
   if (input_pending_) {
@@ -355,10 +356,17 @@ bool SetpointGenerator::sample(double t, Setpoint* out) {
   while (!queue_.empty() && queue_.front().start <= t) {
     Entry next = std::move(queue_.front());
     queue_.pop_front();
-    FlatState before;
+    FlatState before, then;
     if (!next.reanchor && commandedAt(next.start, &before)) {
       const FlatState s = trajectoryState(next, 0.0);
-      const double gap = (s.position - before.position).norm();
+      double gap = (s.position - before.position).norm();
+      // Arriving after setpoints past its start went out (late, not a stall of the sampling), it
+      // has moved away from them meanwhile (from a hold, by half its acceleration times the delay
+      // squared): that step, at the last sample, is what the vehicle would see.
+      if (previous_t > next.start && commandedAt(previous_t, &then)) {
+        const double late = std::min(previous_t - next.start, next.pos.duration());
+        gap = std::max(gap, (trajectoryState(next, late).position - then.position).norm());
+      }
       const double velocity_gap = (s.velocity - before.velocity).norm();
       if (!(gap <= config_.max_takeover_gap_m) || !(velocity_gap <= config_.max_takeover_velocity_gap_mps)) {
         ++stats_.discontinuous_refused;

@@ -67,6 +67,18 @@ UniformBspline brakeAlongX(const Eigen::Vector3d& p0, double v0, double acc) {
   return brake;
 }
 
+// A cubic accelerating along +x from rest at p0 at acc for duration_s.
+UniformBspline accelerateAlongX(const Eigen::Vector3d& p0, double acc, double duration_s) {
+  const double h = 0.05;
+  std::vector<Eigen::Vector3d> pts;
+  for (double s = 0.0; s <= duration_s + 1e-9; s += h) pts.push_back(p0 + Eigen::Vector3d(0.5 * acc * s * s, 0, 0));
+  UniformBspline ramp;
+  EXPECT_TRUE(UniformBspline::fitToPoints(pts, h, Eigen::Vector3d::Zero(), Eigen::Vector3d(acc, 0, 0),
+                                          Eigen::Vector3d(acc * duration_s, 0, 0), Eigen::Vector3d(acc, 0, 0), 3,
+                                          &ramp));
+  return ramp;
+}
+
 bool stopping(Mode m) { return m == Mode::kEndStop || m == Mode::kWatchdogStop; }
 
 // Setpoints sampled every kDt never jump: each position step is within the speed times the period
@@ -503,6 +515,43 @@ TEST(SetpointGenerator, ALateBrakeIsJudgedAtItsStartTime) {
   ASSERT_TRUE(gen.sample(t, &sp));
   EXPECT_EQ(sp.trajectory_id, 1);
   EXPECT_EQ(gen.stats().discontinuous_refused, 0);
+}
+
+// A trajectory from rest that arrives late starts from the commanded state at its start time, but
+// has moved on by then: taken over, the setpoint would step by half its acceleration times the
+// delay squared (8.4 cm at 2 m/s^2, 0.29 s after the start at the last sample; seen under a
+// sanitizer's load after a ROS time step). Refused: the hold goes on. One 0.1 s late steps by
+// 1 cm and takes over.
+TEST(SetpointGenerator, ALateTakeoverIsJudgedOnTheStepItMakesNow) {
+  SetpointGenerator gen{SetpointGenerator::Config()};
+  const Eigen::Vector3d p(1, 2, 1);
+  ASSERT_TRUE(gen.add(1, 0, 0.0, line(p, p)));
+  std::vector<Setpoint> sps;
+  Setpoint sp;
+  double t = 0.0;
+  auto run = [&](int n) {
+    for (int k = 0; k < n; ++k, t += kDt) {
+      gen.noteHeartbeat(t);
+      ASSERT_TRUE(gen.sample(t, &sp));
+      sps.push_back(sp);
+    }
+  };
+  run(100);
+  ASSERT_TRUE(gen.add(1, 1, t - 0.3, accelerateAlongX(p, 2.0, 2.0)));
+  run(10);
+  EXPECT_EQ(sp.trajectory_id, 0);
+  EXPECT_EQ(gen.stats().discontinuous_refused, 1);
+  EXPECT_NEAR(gen.stats().last_takeover_gap_m, 0.084, 0.003);
+  EXPECT_LT((sp.state.position - p).norm(), 1e-9);
+  expectSmooth(sps, 2.5, 10.0);
+  const size_t k = sps.size();  // the take-over sample
+  ASSERT_TRUE(gen.add(1, 2, t - 0.1, accelerateAlongX(p, 2.0, 2.0)));
+  run(10);
+  EXPECT_EQ(sp.trajectory_id, 2);
+  EXPECT_EQ(gen.stats().discontinuous_refused, 1);
+  const double step = (sps[k].state.position - sps[k - 1].state.position).norm();
+  EXPECT_NEAR(step, 0.01, 0.002);
+  EXPECT_LE(step, gen.config().max_takeover_gap_m + sps[k].state.velocity.norm() * kDt);
 }
 
 // --- 5. Continuity at the take-over ---

@@ -13,8 +13,10 @@
 //   its take-over (counted; the setpoint goes on as before): the planner planned from a state the
 //   vehicle is not commanded to be in (it missed a watchdog stop, or a restarted planner started
 //   from odometry). Judged at the start time, a trajectory that arrives late (an emergency brake
-//   starting "now" at the planner) is not refused for the motion since; one that starts before the
-//   current trajectory took over is judged on the source that one replaced. A refusal while moving
+//   starting "now" at the planner) is not refused for the velocity it has changed since; but when
+//   setpoints past its start went out before it arrived, its position at the last of them is judged
+//   too (the step the vehicle would see; a stall of the sampling is no such delay). One that starts
+//   before the current trajectory took over is judged on the source that one replaced. A refusal while moving
 //   starts the smooth stop along the current path at once (the planner replaced that trajectory, so
 //   it is no longer checked; the planner then plans from the hold). The planner learns the commanded
 //   setpoint from the published position command (mode, trajectory id, planner session) and plans
