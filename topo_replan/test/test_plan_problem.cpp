@@ -319,5 +319,20 @@ TEST(PlanProblem, TheStretchedRetryKeepsAMovingStart) {
   EXPECT_EQ(checked.status, OptimizationStatus::kSuccess) << checked.message;
 }
 
+// A windows flight (ideal sensing) climbing to a window at the band's top: the minimum-snap
+// reference overshot its route above the band (3 m), and the local goal sat on it at 3.26 m. Every
+// candidate left the band ("out of map"; two calls in a row). Out of the band counts as a collision
+// of the reference now: the local goal is the first point back inside, and the plan succeeds.
+TEST(PlanProblem, NoLocalGoalOnAReferenceAboveTheBand) {
+  PlanProblem problem;
+  std::string why;
+  ASSERT_TRUE(loadPlanProblem(kPlans + "reference_over_the_band_top", &problem, &why)) << why;
+  const TopoReplanner::Config config = plannerYaml();
+  const LocalProblem lp = TopoReplanner::create(config, &why)->localProblem(*problem.esdf, problem.request);
+  ASSERT_EQ(lp.status, ReplanStatus::kSuccess) << lp.message;
+  EXPECT_LE(lp.goal.z(), config.optimizer.max_z_m);
+  expectCheckedPlan(problem, config);
+}
+
 }  // namespace
 }  // namespace topo_planner

@@ -253,6 +253,37 @@ TEST(TopoReplanner, LocalGoalSkipsPastAnObstacleRightBehindTheFirst) {
   EXPECT_LT(in_gap.goal.x(), 8.2);
 }
 
+// A reference that leaves the height band (a minimum-snap reference overshoots its route over a
+// wall as high as the band: seen in a windows flight, the local goal 0.26 m above the band) gets no
+// local goal outside it: out of the band counts as a collision of the reference, and the plan
+// reaches back into the band past the overshoot.
+TEST(TopoReplanner, NoLocalGoalAboveTheHeightBand) {
+  SyntheticScene scene({20.0, 8.0, 3.0});
+  const EsdfMap& map = scene.finish();
+  TopoReplanner::Config config = deterministicConfig(2);
+  config.horizon_m = 6.0;
+  config.local_goal_margin_m = 1.0;
+  config.search.roadmap.min_z_m = config.astar.min_z_m = config.optimizer.min_z_m = 0.5;
+  config.search.roadmap.max_z_m = config.astar.max_z_m = config.optimizer.max_z_m = 2.0;
+  PolynomialTrajectory ref;
+  ASSERT_EQ(referenceTrajectory({{1, 4, 1.2}, {7, 4, 2.6}, {13, 4, 1.2}, {19, 4, 1.2}}, FlatState::atRest({1, 4, 1.2}),
+                                FlatState::atRest({19, 4, 1.2}), ReferenceConfig(), &ref),
+            TrajectoryStatus::kSuccess);
+  ReplanRequest req;
+  req.start = ref.state(0.0);
+  req.reference = &ref;
+  std::string err;
+  auto replanner = TopoReplanner::create(config, &err);
+  ASSERT_TRUE(replanner) << err;
+  const LocalProblem lp = replanner->localProblem(map, req);
+  ASSERT_EQ(lp.status, ReplanStatus::kSuccess) << lp.message;
+  EXPECT_LE(lp.goal.z(), 2.0);
+  EXPECT_GT(lp.goal.x(), 7.0);  // past the overshoot, not short of it
+  const ReplanResult r = replanner->replan(map, req);
+  ASSERT_EQ(r.status, ReplanStatus::kSuccess) << r.message;
+  for (double t = 0.0; t <= r.trajectory.duration(); t += 0.01) EXPECT_LE(r.trajectory.evaluate(t).z(), 2.0 + 1e-6);
+}
+
 // Replanning from moving starts, as in flight: starts on the cruise-speed reference through seeded
 // high-density forests (0.4 m clear, no reference collision within the next 3 m), the reference
 // checked 7 m ahead. With the local goal 2 m past the last collision and past any obstacle right
