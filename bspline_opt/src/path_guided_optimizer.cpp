@@ -12,13 +12,8 @@
 #include "topo_planner/bspline_opt/bspline_costs.h"
 
 namespace topo_planner {
-namespace {
 
-using Clock = std::chrono::steady_clock;
-
-// A cubic's first three control points set for a start state at its knot span dt:
-// p = (Q0 + 4 Q1 + Q2) / 6, v = (Q2 - Q0) / (2 dt), a = (Q0 - 2 Q1 + Q2) / dt^2. False (unchanged)
-// for other degrees.
+// p = (Q0 + 4 Q1 + Q2) / 6, v = (Q2 - Q0) / (2 dt), a = (Q0 - 2 Q1 + Q2) / dt^2.
 bool setCubicStart(const Eigen::Vector3d& p, const Eigen::Vector3d& v, const Eigen::Vector3d& a, UniformBspline* s) {
   if (s->degree() != 3 || s->numControlPoints() < 3) return false;
   const double dt = s->knotSpan();
@@ -28,6 +23,11 @@ bool setCubicStart(const Eigen::Vector3d& p, const Eigen::Vector3d& v, const Eig
   s->controlPoints().row(2) = (q1 + v * dt + a * dt * dt / 2.0).transpose();
   return true;
 }
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
 constexpr double kMaxCheckIntervals = 1e7;  // bound of the final check's curve samples
 double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
@@ -502,6 +502,20 @@ OptimizationResult PathGuidedOptimizer::optimize(const UniformBspline& initial, 
     again.stats.check_ms += check_ms;
     // Costs as this optimiser weighs them, so candidates compare alike.
     result = std::move(again);
+  }
+  if (result.status == OptimizationStatus::kInCollision && config_.guide_phase_fallback) {
+    // The guide phase's spline, timed as the stretched retry times a refined one: it follows the
+    // guide, which keeps the search's clearance, and when it passes the check it is a plan.
+    OptimizationResult kept = warmup;
+    kept.stats.check_ms = 0.0;
+    finishStretched(&kept);
+    if (kept.status == OptimizationStatus::kSuccess) {
+      addTimes(result.stats, &kept.stats);
+      kept.stats.guide_phase_kept = true;
+      result = std::move(kept);
+    } else {
+      result.stats.check_ms += kept.stats.check_ms;
+    }
   }
   result.cost.guide = warmup.cost.guide;
   result.stats.phase1_ms = warmup.stats.phase1_ms;

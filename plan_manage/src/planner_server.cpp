@@ -583,6 +583,8 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("optimizer/lambda_collision", p.optimizer.l2c);
   r.read("optimizer/feasibility_margin", p.optimizer.feasibility_margin);
   r.read("optimizer/stretched_retry", p.optimizer.stretched_retry);
+  r.read("optimizer/guide_phase_fallback", p.optimizer.guide_phase_fallback);
+  r.read("optimizer/max_time_ratio", p.optimizer.max_time_ratio);
   r.read("optimizer/face_offset_m", p.optimizer.face_offset_m);
   // The planning's wall-clock budgets (the roadmap's sampling time, NLopt's time per run) stretch on
   // a slow machine (sanitizers: the Makefile sets it with TOPO_PLANNER_BUDGET_SCALE); the counts

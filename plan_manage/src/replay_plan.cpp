@@ -71,11 +71,15 @@ void printPhases(const TopoReplanner& replanner, const LocalProblem& lp, const P
   show("guide phase", warm);
   if (warm.status != OptimizationStatus::kSuccess) return;
   show("refine", optimizer.refinePhase(warm.spline, map));
-  // The stretched retry's start: the guide phase's spline timed for the refine's limits.
+  // The stretched retry's start: the guide phase's spline timed for the refine's limits, keeping
+  // the start state as optimize() does.
   const PathGuidedOptimizer::Config& oc = replanner.config().optimizer;
   OptimizationResult stretched = warm;
   const double ratio = stretched.spline.reallocateTime(oc.feasibility_margin * oc.max_vel_mps,
                                                        oc.feasibility_margin * oc.max_acc_mps2, true);
+  const UniformBspline vel = lp.initial.derivative();
+  if (ratio > 1.0)
+    setCubicStart(lp.initial.evaluate(0.0), vel.evaluate(0.0), vel.derivative().evaluate(0.0), &stretched.spline);
   std::printf("       guide phase stretched x%.2f to the refine's limits:\n", ratio);
   show("  stretched", stretched);
   show("  refine", optimizer.refinePhase(stretched.spline, map));

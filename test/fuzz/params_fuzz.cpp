@@ -163,6 +163,7 @@ void fuzzPlanner(FuzzInput& in) {
   f.moving_retry_interval_s = in.number(f.moving_retry_interval_s);
   p.optimizer.feasibility_margin = in.number(p.optimizer.feasibility_margin);
   p.optimizer.stretched_retry = in.flag();
+  p.optimizer.guide_phase_fallback = in.flag();
   p.astar.margin_doublings = in.integer(p.astar.margin_doublings);
 
   std::string why;

@@ -963,6 +963,7 @@ TEST(ReplanFsm, FliesSeededHighDensityForestsToTheirGoals) {
       config.reference.max_acc_mps2 = 1.875;
       config.replanner.optimizer.feasibility_margin = variant.margin;
       config.replanner.optimizer.stretched_retry = variant.stretched_retry;
+      config.replanner.optimizer.guide_phase_fallback = variant.stretched_retry;  // both after a refine in collision
       auto fsm = makeFsm(config);
       const FlightLog log = fly(fsm.get(), start, {goal}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
                                 1200, map);

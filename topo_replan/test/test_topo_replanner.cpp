@@ -290,8 +290,10 @@ TEST(TopoReplanner, NoLocalGoalAboveTheHeightBand) {
 // behind it (the planner node's settings) nearly all succeed; with the earlier 1 m, stopping before
 // the next obstacle, many fail, nearly always in collision in the last third of the local
 // trajectory. When written: 65 against 55 of 67 here; 340 against 300 of 344 over 40 forests.
+// The two rules are compared without the optimiser's guide-phase fallback, which rescues most of
+// the old rule's failures too (66 of 67 each with it).
 TEST(TopoReplanner, MovingStartsInHighDensityForests) {
-  int total = 0, ok = 0, ok_old = 0;
+  int total = 0, ok = 0, ok_new = 0, ok_old = 0;
   for (uint32_t seed = 1; seed <= 8; ++seed) {
     const Eigen::Vector3d start(-15, 0, 1), goal(15.0, -4.0 + 0.3 * seed, 1.3);
     SyntheticScene scene = SyntheticScene::simulationForest(ObstacleDensity::kHigh, seed, {start, goal});
@@ -310,10 +312,14 @@ TEST(TopoReplanner, MovingStartsInHighDensityForests) {
     TopoReplanner::Config old_config = config;
     old_config.local_goal_margin_m = 1.0;
     old_config.max_local_goal_extension_m = 0.0;
+    old_config.optimizer.guide_phase_fallback = false;
+    TopoReplanner::Config new_config = config;
+    new_config.optimizer.guide_phase_fallback = false;
     std::string err;
     auto replanner = TopoReplanner::create(config, &err);
+    auto new_replanner = TopoReplanner::create(new_config, &err);
     auto old_replanner = TopoReplanner::create(old_config, &err);
-    ASSERT_TRUE(replanner && old_replanner) << err;
+    ASSERT_TRUE(replanner && new_replanner && old_replanner) << err;
     for (double t = 2.0; t < ref.duration() - 3.0; t += 0.5) {
       ReplanRequest req;
       req.start = ref.state(t);
@@ -325,13 +331,16 @@ TEST(TopoReplanner, MovingStartsInHighDensityForests) {
       if (!clear) continue;
       ++total;
       ok += replanner->replan(map, req).status == ReplanStatus::kSuccess;
+      ok_new += new_replanner->replan(map, req).status == ReplanStatus::kSuccess;
       ok_old += old_replanner->replan(map, req).status == ReplanStatus::kSuccess;
     }
   }
-  std::printf("moving starts: %d of %d replanned (%d with the 1 m local goal margin)\n", ok, total, ok_old);
+  std::printf("moving starts: %d of %d replanned; without the guide-phase fallback %d (%d with the 1 m local goal "
+              "margin)\n", ok, total, ok_new, ok_old);
   ASSERT_GT(total, 40);
   EXPECT_GE(ok, total * 95 / 100);
-  EXPECT_GT(ok, ok_old);
+  EXPECT_GE(ok, ok_new);
+  EXPECT_GT(ok_new, ok_old);
 }
 
 // A retry (request.attempt > 0) draws another roadmap; the same attempt gives the same result.
@@ -382,8 +391,8 @@ TEST(TopoReplanner, GoalsBesideObstaclesAreReachedOnTheFinalApproach) {
        },
        {8.0, 5.0, 1.5}},
   };
-  // Variants: as configured; without guide timing, collision retries nor the stretched retry (the
-  // ablation); with only the collision retries (PathGuidedOptimizer::Config::collision_retries);
+  // Variants: as configured; without guide timing, collision retries, the stretched retry nor the
+  // guide-phase fallback (the ablation); with only the collision retries (PathGuidedOptimizer::Config::collision_retries);
   // with only the stretched retry (Config::stretched_retry). Each rescues some of the wall cases.
   std::vector<int> failures;
   for (const auto& [timed_guides, retries, stretched] : std::vector<std::tuple<bool, bool, bool>>{
@@ -404,6 +413,7 @@ TEST(TopoReplanner, GoalsBesideObstaclesAreReachedOnTheFinalApproach) {
         if (!timed_guides) config.guide_timing_ratio = 1e9;
         if (!retries) config.optimizer.collision_retries = 0;
         config.optimizer.stretched_retry = stretched;
+        config.optimizer.guide_phase_fallback = timed_guides && retries && stretched;  // as configured only
         std::string err;
         auto replanner = TopoReplanner::create(config, &err);
         ASSERT_TRUE(replanner) << err;

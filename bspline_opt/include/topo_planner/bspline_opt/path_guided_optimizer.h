@@ -66,7 +66,12 @@ struct OptimizationStats {
   int check_samples = 0;        ///< curve samples of the final check
   double max_vel_mps = 0.0;     ///< bound from the velocity control points of the result past its start
   double max_acc_mps2 = 0.0;    ///< ... and from its acceleration control points (maxAccelerationPastStart)
+  bool guide_phase_kept = false;  ///< the result is the guide phase's spline (Config::guide_phase_fallback)
 };
+
+/// A cubic's first three control points set for the start state (p, v, a) at its knot span (after
+/// a re-timing, which scales the start's derivatives). False (unchanged) for other degrees.
+bool setCubicStart(const Eigen::Vector3d& p, const Eigen::Vector3d& v, const Eigen::Vector3d& a, UniformBspline* s);
 
 struct OptimizationResult {
   OptimizationStatus status = OptimizationStatus::kInvalidInput;
@@ -132,6 +137,11 @@ class PathGuidedOptimizer {
     /// sides the control points straddle, and pulls the curve through it (a wall beside the window
     /// the guide goes through). The stretch is part of stats.time_ratio. false: the paper's PGO.
     bool stretched_retry = true;
+    /// Last: when every refined curve collides, the guide phase's spline, timed like the stretched
+    /// retry's result, is the result if it passes the check. The refine trades clearance for
+    /// smoothness and feasibility, and in a tight window (its bottom near the band's floor) it
+    /// can push a curve that was clear out of clearance. false: the paper's PGO.
+    bool guide_phase_fallback = true;
     // GTO with random restarts: restart r > 0 starts from the initial spline plus a smooth lateral
     // bump (zero at the fixed ends) and per-point noise.
     double restart_offset_m = 1.5;  ///< largest bump, uniform in [0, this], perpendicular to start-goal [m]
@@ -159,7 +169,8 @@ class PathGuidedOptimizer {
 
   /// PGO: phase 1, phase 2, time reallocation, final check (phase 2 again while the check finds a
   /// collision: from the stretched guide-phase spline (stretched_retry), then up to
-  /// collision_retries times from where it ended).
+  /// collision_retries times from where it ended; then the guide phase's spline itself,
+  /// guide_phase_fallback).
   OptimizationResult optimize(const UniformBspline& initial, const Path& guide, const EsdfMap& map) const;
   /// Baseline GTO: phase 2 from the initial spline, time reallocation, final check.
   OptimizationResult gto(const UniformBspline& initial, const EsdfMap& map) const;
