@@ -125,12 +125,13 @@ LocalProblem TopoReplanner::localProblem(const EsdfMap& map, const ReplanRequest
   // The reference within the horizon: where does it first collide, where does the horizon end.
   // Out of the height band (the optimiser's, which its check enforces) counts as a collision: a
   // minimum-snap reference overshoots its route over a wall as high as the band, and a local goal
-  // there cannot be planned to. A start out of the band (a take-off) allows as much.
+  // there cannot be planned to. A start or a final goal out of the band (a take-off, a landing)
+  // allows as much, as the optimiser's check does.
   const double dt = config_.reference_sample_s, T = ref.duration();
   auto bandExcess = [&](double z) {
     return std::max({0.0, config_.optimizer.min_z_m - z, z - config_.optimizer.max_z_m});
   };
-  const double band_allowed = bandExcess(start.position.z()) + 1e-3;
+  const double band_allowed = std::max(bandExcess(start.position.z()), bandExcess(ref.position(T).z())) + 1e-3;
   auto collides = [&](double t) {
     const Eigen::Vector3d p = ref.position(t);
     const DistanceQuery q = map.query(p);

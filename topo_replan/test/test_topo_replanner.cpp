@@ -282,6 +282,18 @@ TEST(TopoReplanner, NoLocalGoalAboveTheHeightBand) {
   const ReplanResult r = replanner->replan(map, req);
   ASSERT_EQ(r.status, ReplanStatus::kSuccess) << r.message;
   for (double t = 0.0; t <= r.trajectory.duration(); t += 0.01) EXPECT_LE(r.trajectory.evaluate(t).z(), 2.0 + 1e-6);
+
+  // A final goal above the band (a landing pad on a roof, a take-off's reverse) allows as much: the
+  // local goal on the way up to it is not refused.
+  PolynomialTrajectory up;
+  ASSERT_EQ(referenceTrajectory({{1, 4, 1.2}, {7, 4, 2.4}}, FlatState::atRest({1, 4, 1.2}), FlatState::atRest({7, 4, 2.4}),
+                                ReferenceConfig(), &up),
+            TrajectoryStatus::kSuccess);
+  req.reference = &up;
+  req.start = up.state(0.0);
+  const LocalProblem to_roof = replanner->localProblem(map, req);
+  ASSERT_EQ(to_roof.status, ReplanStatus::kSuccess) << to_roof.message;
+  EXPECT_GT(to_roof.goal.z(), 2.3);  // the horizon's end, above the band
 }
 
 // Replanning from moving starts, as in flight: starts on the cruise-speed reference through seeded
