@@ -29,6 +29,7 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 constexpr double kMaxCheckIntervals = 1e7;  // bound of the final check's curve samples
+constexpr double kStartSlackM = 0.01;       // a curve leaving the clearance from inside it: sampling slack [m]
 double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
 bool finiteNonNegative(double x) { return std::isfinite(x) && x >= 0.0; }
@@ -366,6 +367,13 @@ void PathGuidedOptimizer::finish(const EsdfMap& map, OptimizationResult* result)
   auto bandExcess = [&](double z) { return std::max({0.0, config_.min_z_m - z, z - config_.max_z_m}); };
   const double band_allowed =
       std::max(bandExcess(spline.evaluate(0.0).z()), bandExcess(spline.evaluate(duration).z())) + 0.05;
+  // A curve that starts inside the clearance (the map grew beside the trajectory being flown) may
+  // stay inside it only while it moves out: until it first reaches the clearance, no sample closer
+  // than the start by more than kStartSlackM.
+  const DistanceQuery at_start = map.query(spline.evaluate(0.0));
+  bool leaving = at_start.status != QueryStatus::kOutOfMap && at_start.status != QueryStatus::kInvalidInput &&
+                 at_start.distance < config_.clearance_m;
+  const double leaving_floor = at_start.distance - kStartSlackM;
   for (int k = 0; k <= intervals; ++k) {
     const double t_k = duration * k / intervals;
     const Eigen::Vector3d p = spline.evaluate(t_k);
@@ -380,7 +388,8 @@ void PathGuidedOptimizer::finish(const EsdfMap& map, OptimizationResult* result)
       stats.min_clearance_m = q.distance;
       stats.min_clearance_t_s = t_k;
     }
-    if (q.distance < config_.clearance_m) collision = true;
+    if (leaving && q.distance >= config_.clearance_m) leaving = false;
+    if (q.distance < (leaving ? leaving_floor : config_.clearance_m)) collision = true;
   }
   stats.check_samples = intervals + 1;
 

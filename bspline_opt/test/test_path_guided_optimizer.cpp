@@ -343,6 +343,46 @@ TEST(PathGuidedOptimizer, TheHeightBandIsChecked) {
             OptimizationStatus::kSuccess);  // no band
 }
 
+// A curve that starts inside the clearance (the map grew beside the trajectory being flown) passes
+// while it moves out of it; one that stays inside, or comes closer than its start, does not; and a
+// curve from outside is held to the whole clearance as before.
+TEST(PathGuidedOptimizer, ACurveFromInsideTheClearanceMustMoveOut) {
+  SyntheticScene scene({10.0, 6.0, 3.0});
+  scene.box({4.0, 0.0, 0.0}, {5.0, 2.8, 3.0});  // a block: the ESDF counts from its voxels' centres, y = 2.75
+  const EsdfMap& map = scene.finish();
+  const PathGuidedOptimizer optimizer(testConfig());
+  // A cubic through control points (x, y) at z = 1.5, from rest (the first three at the first).
+  auto curve = [](std::vector<Eigen::Vector2d> xy) {
+    xy.insert(xy.begin(), 2, xy.front());
+    xy.insert(xy.end(), 2, xy.back());
+    Eigen::MatrixX3d q(Eigen::Index(xy.size()), 3);
+    for (size_t i = 0; i < xy.size(); ++i) q.row(Eigen::Index(i)) << xy[i].x(), xy[i].y(), 1.5;
+    return UniformBspline(q, 3, 0.5);
+  };
+  const Eigen::Vector3d start(4.5, 2.92, 1.5);  // 0.17 m
+  const double d0 = map.query(start).distance;
+  ASSERT_GT(d0, 0.1);
+  ASSERT_LT(d0, kClearance);
+  // Away from the face, then on.
+  const OptimizationResult out = optimizer.check(curve({{4.5, 2.92}, {4.5, 3.3}, {4.8, 3.7}, {6.0, 4.2}, {8.0, 4.2}}), map);
+  EXPECT_EQ(out.status, OptimizationStatus::kSuccess) << out.message;
+  EXPECT_NEAR(out.stats.min_clearance_m, d0, 0.01);
+  // Along the face at the start's distance, then away: passes; 5 cm closer than the start: fails.
+  EXPECT_EQ(optimizer.check(curve({{4.5, 2.92}, {4.7, 2.92}, {4.9, 2.92}, {5.5, 3.6}, {6.0, 4.2}}), map).status,
+            OptimizationStatus::kSuccess);
+  EXPECT_EQ(optimizer.check(curve({{4.5, 2.92}, {4.6, 2.87}, {4.8, 2.87}, {5.5, 3.6}, {6.0, 4.2}}), map).status,
+            OptimizationStatus::kInCollision);
+  // Out, then back in to 0.2 m (farther than the start): held to the clearance once it has left it.
+  const std::vector<Eigen::Vector2d> dip{{4.5, 2.95}, {4.6, 2.95}, {4.7, 2.95}, {5.5, 3.8}, {6.0, 4.2}};
+  std::vector<Eigen::Vector2d> back{{4.5, 2.92}, {4.3, 3.6}, {4.4, 3.6}};
+  back.insert(back.end(), dip.begin(), dip.end());
+  EXPECT_EQ(optimizer.check(curve(back), map).status, OptimizationStatus::kInCollision);
+  // From outside the clearance into it: as before.
+  std::vector<Eigen::Vector2d> in{{4.3, 3.6}, {4.4, 3.6}};
+  in.insert(in.end(), dip.begin(), dip.end());
+  EXPECT_EQ(optimizer.check(curve(in), map).status, OptimizationStatus::kInCollision);
+}
+
 // Under a low overhang near the window's floor (a table 0.55 m above the floor of the map, which is
 // also the window's bottom face, as with the simulation's raised floor), the overhang's ESDF
 // gradient pushes the control points down. The window's faces count as obstacles in the collision

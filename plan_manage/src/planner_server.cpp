@@ -564,6 +564,7 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("replan/control_point_spacing_m", p.control_point_spacing_m);
   r.read("replan/guide_timing_ratio", p.guide_timing_ratio);
   r.read("replan/max_search_start_offset_m", p.max_search_start_offset_m);
+  r.read("replan/min_start_clearance_m", p.min_start_clearance_m);
   r.read("replan/num_threads", p.num_threads);
   r.read("search/clearance_m", p.search.clearance_m);
   r.read("search/max_paths", p.search.max_paths);

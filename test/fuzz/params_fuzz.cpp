@@ -147,6 +147,7 @@ void fuzzPlanner(FuzzInput& in) {
   p.control_point_spacing_m = in.number(p.control_point_spacing_m);
   p.guide_timing_ratio = in.number(p.guide_timing_ratio);
   p.max_search_start_offset_m = in.number(p.max_search_start_offset_m);
+  p.min_start_clearance_m = in.number(p.min_start_clearance_m);
   p.num_threads = std::min(in.integer(1), 4);  // worker threads: kept few, the fuzzer runs on one core
   p.search.clearance_m = in.number(p.search.clearance_m);
   p.search.max_paths = in.integer(p.search.max_paths);

@@ -55,6 +55,7 @@ bool TopoReplanner::Config::validate(std::string* why) const {
   if (!(control_point_spacing_m > 0.0)) err << "control_point_spacing_m must be positive; ";
   if (!(guide_timing_ratio >= 1.0) || !std::isfinite(guide_timing_ratio)) err << "guide_timing_ratio must be >= 1; ";
   if (!(max_start_velocity_step_mps >= 0.0)) err << "max_start_velocity_step_mps must be >= 0; ";
+  if (!(min_start_clearance_m >= 0.0)) err << "min_start_clearance_m must be >= 0; ";
   if (!(max_search_start_offset_m >= 0.0 && max_search_start_offset_m <= 5.0))
     err << "max_search_start_offset_m must be in [0, 5]; ";
   if (!(std::isfinite(astar.search_margin_m) && astar.search_margin_m >= 0.0)) err << "astar: search_margin_m must be >= 0; ";
@@ -110,8 +111,8 @@ LocalProblem TopoReplanner::localProblem(const EsdfMap& map, const ReplanRequest
   const DistanceQuery at_start = map.query(start.position);
   if (at_start.status == QueryStatus::kOutOfMap || at_start.status == QueryStatus::kInvalidInput)
     return fail(ReplanStatus::kInvalidInput, "the start is outside the map");
-  if (at_start.distance < config_.optimizer.clearance_m)
-    return fail(ReplanStatus::kStartInCollision, "the start is closer than the optimiser's clearance to an obstacle");
+  if (at_start.distance < std::min(config_.min_start_clearance_m, config_.optimizer.clearance_m))
+    return fail(ReplanStatus::kStartInCollision, "the start is closer than min_start_clearance_m to an obstacle");
   lp.search_start = start.position;
   if (!search_free.isFree(start.position)) {
     std::vector<Eigen::Vector3d> walk;

@@ -219,6 +219,41 @@ TEST(TopoReplanner, StartInsideTheSearchClearanceIsSearchedFromOutsideIt) {
   EXPECT_EQ(strict->replan(map, req).status, ReplanStatus::kStartInCollision);
 }
 
+// A start 0.22 m from a wall (the map grew beside the trajectory being flown: a flight kept its
+// trajectory at 0.21 m after failed plans, and seven calls in a row were kStartInCollision until it
+// stopped and escaped) is planned from when min_start_clearance_m allows it, and the plan moves
+// out of the optimiser's clearance; by default it is kStartInCollision, as below min_start_clearance_m.
+TEST(TopoReplanner, AStartInsideTheClearanceIsPlannedOutOfIt) {
+  SyntheticScene scene({12.0, 8.0, 3.0});
+  scene.box({0.0, 5.0, -1.0}, {12.0, 6.0, 4.0});  // a wall along the way (its voxels' centres from y = 5.05)
+  scene.pillar(6.0, 4.5, 0.5);                     // across the reference
+  const EsdfMap& map = scene.finish();
+  const Eigen::Vector3d start(1.0, 4.83, 1.5);  // 0.22 m
+  const double d0 = map.query(start).distance;
+  ASSERT_GT(d0, 0.2);
+  ASSERT_LT(d0, 0.25);
+  const PolynomialTrajectory ref = straightReference(start, {11, 4.0, 1.5});
+  ReplanRequest req;
+  req.start = ref.state(0.0);
+  req.reference = &ref;
+  TopoReplanner::Config config = deterministicConfig(2);
+  std::string err;
+  EXPECT_EQ(TopoReplanner::create(config, &err)->replan(map, req).status, ReplanStatus::kStartInCollision);
+  config.min_start_clearance_m = 0.2;
+  const ReplanResult r = TopoReplanner::create(config, &err)->replan(map, req);
+  ASSERT_EQ(r.status, ReplanStatus::kSuccess) << r.message;
+  bool out = false;
+  for (double t = 0.0; t <= r.trajectory.duration(); t += 0.01) {
+    const double d = map.query(r.trajectory.evaluate(t)).distance;
+    if (!out) EXPECT_GE(d, d0 - 0.011) << "t = " << t;
+    out = out || d >= config.optimizer.clearance_m;
+    if (out) EXPECT_GE(d, config.optimizer.clearance_m - 1e-3) << "t = " << t;
+  }
+  EXPECT_TRUE(out);
+  config.min_start_clearance_m = 0.23;
+  EXPECT_EQ(TopoReplanner::create(config, &err)->replan(map, req).status, ReplanStatus::kStartInCollision);
+}
+
 // The local goal ends local_goal_margin_m of free reference, past a second obstacle that follows
 // the first too closely (a goal in the gap would end the trajectory heading into the second one);
 // without the extension it stops in the gap, as before.

@@ -14,7 +14,9 @@
 //    limits the knot span is lengthened (UniformBspline::reallocateTime, the path is unchanged).
 //  * Final check: the curve is sampled at most a check step apart in arc length (half a voxel by
 //    default; the time step is the step over the speed bound) on the true ESDF (trilinear
-//    EsdfMap::query) against clearance_m, and the limits are checked on the derivative control
+//    EsdfMap::query) against clearance_m (a curve that starts inside it must move out: until it
+//    first reaches it, no sample more than 1 cm closer than the start), and the limits are checked
+//    on the derivative control
 //    points (convex hull bound, so they hold along the whole curve), all but those the start state
 //    alone fixes (UniformBspline::maxAccelerationPastStart): a curve planned from hard braking keeps
 //    that state at its start, and is held to the limits from there on.
@@ -110,7 +112,7 @@ class PathGuidedOptimizer {
     // Feasibility and final check.
     bool reallocate_time = true;  ///< lengthen the knot span when the limits are exceeded (else kInfeasible)
     double max_time_ratio = 3.0;  ///< a longer stretch is kInfeasible (the stretched spline is returned)
-    double clearance_m = 0.25;    ///< every curve sample keeps at least this ESDF distance [m]
+    double clearance_m = 0.25;    ///< every curve sample keeps at least this ESDF distance [m] (see the check)
     /// Height band (a geofence): a curve sample farther out of it than the curve's start or end
     /// (by more than 0.05 m) fails the check as leaving the map [m].
     double min_z_m = -1e9;

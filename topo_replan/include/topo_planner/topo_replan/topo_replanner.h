@@ -171,6 +171,11 @@ class TopoReplanner {
     /// obstacle closer than the search's clearance, and replanning starts on it) is moved up the
     /// distance field at most this far for the search [m]. 0: such a start is kStartInCollision.
     double max_search_start_offset_m = 0.3;
+    /// A start closer to an obstacle than the smaller of this and the optimiser's clearance is
+    /// kStartInCollision (by default the optimiser's clearance). A start between the two (the map
+    /// grew beside the trajectory being flown) is planned from, and the plan must move out of the
+    /// clearance (PathGuidedOptimizer's check) [m].
+    double min_start_clearance_m = 1e9;
     int num_threads = 2;                  ///< optimisation workers, the caller included
     double duration_weight = 0.0;         ///< selection cost weight of the duration [m^2/s^6]
 
