@@ -35,6 +35,7 @@ TopoReplanner::Config plannerYaml() {
   c.control_point_spacing_m = 0.35;
   c.guide_timing_ratio = 1.15;
   c.max_search_start_offset_m = 0.3;
+  c.min_start_clearance_m = 0.2;
   c.num_threads = 2;
   c.search.clearance_m = c.astar.clearance_m = 0.3;
   c.search.max_paths = 5;
@@ -354,6 +355,33 @@ TEST(PlanProblem, TheGuidePhaseIsKeptWhenEveryRefineCollides) {
   const UniformBspline vel = plan.trajectory.derivative();
   EXPECT_LT((plan.trajectory.evaluate(0.0) - problem.request.start.position).norm(), 1e-6);
   EXPECT_LT((vel.evaluate(0.0) - problem.request.start.velocity).norm(), 0.1);
+}
+
+// A windows flight (ideal sensing) kept its trajectory after failed plans while the map grew beside
+// a block: the commanded state came to 0.21 m of it, and seven calls in a row were
+// kStartInCollision until the vehicle stopped and escaped. Planned from (min_start_clearance_m
+// 0.2), the plan moves out of the optimiser's clearance.
+TEST(PlanProblem, AStartInsideTheClearanceIsPlannedOutOfIt) {
+  PlanProblem problem;
+  std::string why;
+  ASSERT_TRUE(loadPlanProblem(kPlans + "start_inside_the_clearance_beside_a_block", &problem, &why)) << why;
+  TopoReplanner::Config config = plannerYaml();
+  const double d0 = problem.esdf->query(problem.request.start.position).distance;
+  ASSERT_LT(d0, config.optimizer.clearance_m);
+  ASSERT_GE(d0, config.min_start_clearance_m);
+  const ReplanResult plan = TopoReplanner::create(config, &why)->replan(*problem.esdf, problem.request);
+  ASSERT_EQ(plan.status, ReplanStatus::kSuccess) << plan.message;
+  bool out = false;
+  for (double t = 0.0; t <= plan.trajectory.duration(); t += 0.005) {
+    const double d = problem.esdf->query(plan.trajectory.evaluate(t)).distance;
+    if (!out) EXPECT_GE(d, d0 - 0.011) << "t = " << t;
+    out = out || d >= config.optimizer.clearance_m;
+    if (out) EXPECT_GE(d, config.optimizer.clearance_m - 0.005) << "t = " << t;
+  }
+  EXPECT_TRUE(out);
+  config.min_start_clearance_m = 1e9;  // the optimiser's clearance, as before
+  EXPECT_EQ(TopoReplanner::create(config, &why)->replan(*problem.esdf, problem.request).status,
+            ReplanStatus::kStartInCollision);
 }
 
 }  // namespace
