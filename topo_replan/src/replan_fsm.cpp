@@ -1708,13 +1708,26 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
       // behind it, and the map it flew through was in the old frame).
       if (std::exchange(anchor_at_rest_, false)) known_anchor_ = takeoverStateLocked(t).position;
       // Stopped: a new reference from here through the mission's goals (or the newer ones).
-      if (!goals_pending_) {
+      const bool fresh = goals_pending_;
+      if (!fresh) {
         pending_goals_ = remainingGoalsLocked();
         goals_pending_ = !pending_goals_.empty();
       }
       if (!goals_pending_) {
         setState(FsmState::kWaitTarget, &out, "stopped, no mission");
-      } else if (startGoalsLocked(t, map, &out)) {
+        break;
+      }
+      bool started = startGoalsLocked(t, map, &out);
+      if (!started && fresh && last_goal_status_ != GoalStatus::kReferenceFailed && !remainingGoalsLocked().empty()) {
+        // Newer goals refused (out of the map, in an obstacle: said in the message and the goal
+        // status) are no reason to drop the mission: it goes on from here, as it would in flight.
+        const GoalStatus refused = last_goal_status_;
+        pending_goals_ = remainingGoalsLocked();
+        goals_pending_ = true;
+        started = startGoalsLocked(t, map, &out);
+        if (started) last_goal_status_ = refused;
+      }
+      if (started) {
         // A new reference from rest is a new strategy: it gets its own max_plan_failures tries (the
         // failures of the replans that led here do not count against it).
         consecutive_failures_ = 0;

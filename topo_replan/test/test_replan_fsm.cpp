@@ -83,6 +83,7 @@ struct Faults {
   double clock_step_s = 0.0;
   double odom_jump_at = INFINITY;                     // odometry off by odom_jump until the FSM re-anchors
   Eigen::Vector3d odom_jump = Eigen::Vector3d::Zero();
+  double bad_goals_at = INFINITY;                     // then, once, goals outside the map are given
 };
 
 struct FlightLog {
@@ -126,6 +127,8 @@ FlightLog fly(ReplanFsm* fsm, const Eigen::Vector3d& start, const std::vector<Ei
     if (!(t_true >= faults.odom_from && t_true < faults.odom_to))
       fsm->setOdometry(t, vehicle.position + odom_offset, vehicle.velocity);
     if (!(t_true >= faults.depth_from && t_true < faults.depth_to)) fsm->setDepthFused(t);
+    if (t_true >= faults.bad_goals_at && t_true < faults.bad_goals_at + 0.5 * dt)
+      EXPECT_EQ(fsm->setGoals({{1e6, 0.0, 1.0}}), GoalStatus::kAccepted);  // refused at the next tick
     log.flown.push_back(vehicle.position);
     log.min_clearance = std::min(log.min_clearance, truth.query(vehicle.position).distance);
     log.duration_s = t_true;
@@ -1259,6 +1262,28 @@ TEST(ReplanFsm, BrakesToAHoverWhileDepthIsStaleAndResumes) {
   EXPECT_EQ(fresh->setGoals({{10, 4, 1.5}}), GoalStatus::kInputsStale);  // depth 1 s old
   EXPECT_FALSE(fresh->inputHealth(1.0).ok);
   EXPECT_NE(fresh->inputHealth(1.0).why.find("depth"), std::string::npos);
+}
+
+// Goals outside the map arrive just as the vehicle, stopped for stale depth, is about to rebuild
+// its mission (a hostile publisher under a sanitizer's load did this in hostile_traffic.test): they
+// are refused, and the mission goes on from the stop. Before, their refusal was taken for the
+// mission's goals being invalid, and the mission was given up 17 m short of its goal.
+TEST(ReplanFsm, GoalsRefusedAtAStopDoNotEndTheMission) {
+  Corridor c;
+  const EsdfMap& map = c.scene.finish();
+  ReplanFsm::Config config = testConfig();
+  config.depth_timeout_s = 0.5;
+  auto fsm = makeFsm(config);
+  Faults faults;
+  faults.depth_from = 3.0;
+  faults.depth_to = 6.0;
+  faults.bad_goals_at = 6.0;  // the first tick with depth again: the FSM is stopped, at rest
+  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
+                            1200, map, faults);
+  EXPECT_TRUE(log.goal_reached);
+  EXPECT_EQ(fsm->lastGoalStatus(), GoalStatus::kGoalOutOfMap);  // what became of the newer goals
+  for (const FsmEvent& e : log.events) EXPECT_NE(e.fallback, "give_up") << e.message;
+  expectContinuous(log.trajectories);
 }
 
 // Odometry stops for 2 s at cruise speed: the safety check brakes (it does not just skip planning);
