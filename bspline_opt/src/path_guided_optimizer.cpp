@@ -364,7 +364,7 @@ void PathGuidedOptimizer::finish(const EsdfMap& map, OptimizationResult* result)
   const int intervals = std::max(1, int(wanted));
   stats.min_clearance_m = std::numeric_limits<double>::infinity();
   bool out_of_map = false, collision = false, out_of_band = false;
-  auto bandExcess = [&](double z) { return std::max({0.0, config_.min_z_m - z, z - config_.max_z_m}); };
+  auto bandExcess = [&](double z) { return heightBandExcess(z, config_.min_z_m, config_.max_z_m); };
   const double band_allowed =
       std::max(bandExcess(spline.evaluate(0.0).z()), bandExcess(spline.evaluate(duration).z())) + 0.05;
   // A curve that starts inside the clearance (the map grew beside the trajectory being flown) may

@@ -160,6 +160,16 @@ TEST(CollisionCost, TheHeightBandFacesCountAsObstacles) {
   }, pts, "band");
 }
 
+// The band's excess: 0 inside and on the faces, the distance past the face outside, either side.
+TEST(HeightBand, ExcessIsTheDistanceOutsideTheBand) {
+  EXPECT_EQ(heightBandExcess(1.0, 0.5, 3.0), 0.0);
+  EXPECT_EQ(heightBandExcess(0.5, 0.5, 3.0), 0.0);
+  EXPECT_EQ(heightBandExcess(3.0, 0.5, 3.0), 0.0);
+  EXPECT_NEAR(heightBandExcess(3.26, 0.5, 3.0), 0.26, 1e-12);
+  EXPECT_NEAR(heightBandExcess(0.1, 0.5, 3.0), 0.4, 1e-12);
+  EXPECT_EQ(heightBandExcess(-5.0, -1e9, 1e9), 0.0);  // the default: no band
+}
+
 // The window's faces count as obstacles: a point near the floor costs (d0 - its height above the
 // interpolation domain)^2 and is pushed up; a point outside costs more; the gradient matches.
 TEST(CollisionCost, TheWindowFacesCountAsObstacles) {

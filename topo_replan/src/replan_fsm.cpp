@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <utility>
 
+#include "topo_planner/bspline_opt/bspline_costs.h"
+
 namespace topo_planner {
 namespace {
 
@@ -736,7 +738,7 @@ ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::s
 }
 
 double ReplanFsm::bandExcess(double z) const {
-  return std::max({0.0, config_.route.min_z_m - z, z - config_.route.max_z_m});
+  return heightBandExcess(z, config_.route.min_z_m, config_.route.max_z_m);
 }
 
 bool ReplanFsm::committable(const EsdfMap& map, const Eigen::Vector3d& p, double start_excess) const {

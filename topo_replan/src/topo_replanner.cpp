@@ -7,6 +7,7 @@
 #include <iomanip>
 #include <sstream>
 
+#include "topo_planner/bspline_opt/bspline_costs.h"
 #include "topo_planner/path_searching/path_shortener.h"
 
 namespace topo_planner {
@@ -129,9 +130,7 @@ LocalProblem TopoReplanner::localProblem(const EsdfMap& map, const ReplanRequest
   // there cannot be planned to. A start or a final goal out of the band (a take-off, a landing)
   // allows as much, as the optimiser's check does.
   const double dt = config_.reference_sample_s, T = ref.duration();
-  auto bandExcess = [&](double z) {
-    return std::max({0.0, config_.optimizer.min_z_m - z, z - config_.optimizer.max_z_m});
-  };
+  auto bandExcess = [&](double z) { return heightBandExcess(z, config_.optimizer.min_z_m, config_.optimizer.max_z_m); };
   const double band_allowed = std::max(bandExcess(start.position.z()), bandExcess(ref.position(T).z())) + 1e-3;
   auto collides = [&](double t) {
     const Eigen::Vector3d p = ref.position(t);

@@ -9,6 +9,7 @@
 // ignores). Pass weight = 1 and a zeroed grad to get the plain gradient.
 
 #include <Eigen/Core>
+#include <algorithm>
 
 #include "topo_planner/plan_env/esdf_map.h"
 
@@ -28,6 +29,13 @@ double guideCost(const Eigen::MatrixX3d& q, const Eigen::MatrixX3d& guide, int f
 /// voxel inside them), negative outside; *inward (optional) is the unit normal of the nearest face,
 /// pointing into the window [m].
 double windowDistance(const GridGeometry& geometry, const Eigen::Vector3d& p, Eigen::Vector3d* inward);
+
+/// How far z lies outside the height band [min_z_m, max_z_m] (a geofence: the optimiser's final
+/// check, the replanner's local goal and the FSM's committed part all allow a curve no farther out
+/// of it than its start or its goal); 0 inside the band [m].
+inline double heightBandExcess(double z, double min_z_m, double max_z_m) {
+  return std::max({0.0, min_z_m - z, z - max_z_m});
+}
 
 /// Collision cost on the free control points: sum of (d0 - d(Q_i))^2 over the points whose distance
 /// d is below d0; zero beyond d0, C1 at d0 [m^2]. d is the smaller of the ESDF distance (trilinear,
