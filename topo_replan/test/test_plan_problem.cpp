@@ -14,6 +14,7 @@
 #include "topo_planner/plan_env/synthetic_scene.h"
 #include "topo_planner/topo_replan/plan_problem_io.h"
 #include "topo_planner/topo_replan/topo_replanner.h"
+#include "clearance_checks.h"
 
 namespace topo_planner {
 namespace {
@@ -371,14 +372,7 @@ TEST(PlanProblem, AStartInsideTheClearanceIsPlannedOutOfIt) {
   ASSERT_GE(d0, config.min_start_clearance_m);
   const ReplanResult plan = TopoReplanner::create(config, &why)->replan(*problem.esdf, problem.request);
   ASSERT_EQ(plan.status, ReplanStatus::kSuccess) << plan.message;
-  bool out = false;
-  for (double t = 0.0; t <= plan.trajectory.duration(); t += 0.005) {
-    const double d = problem.esdf->query(plan.trajectory.evaluate(t)).distance;
-    if (!out) EXPECT_GE(d, d0 - 0.011) << "t = " << t;
-    out = out || d >= config.optimizer.clearance_m;
-    if (out) EXPECT_GE(d, config.optimizer.clearance_m - 0.005) << "t = " << t;
-  }
-  EXPECT_TRUE(out);
+  EXPECT_TRUE(movesOutOfTheClearance(plan.trajectory, *problem.esdf, config.optimizer.clearance_m, 0.005, 0.005));
   config.min_start_clearance_m = 1e9;  // the optimiser's clearance, as before
   EXPECT_EQ(TopoReplanner::create(config, &why)->replan(*problem.esdf, problem.request).status,
             ReplanStatus::kStartInCollision);

@@ -127,8 +127,9 @@ FlightLog fly(ReplanFsm* fsm, const Eigen::Vector3d& start, const std::vector<Ei
     if (!(t_true >= faults.odom_from && t_true < faults.odom_to))
       fsm->setOdometry(t, vehicle.position + odom_offset, vehicle.velocity);
     if (!(t_true >= faults.depth_from && t_true < faults.depth_to)) fsm->setDepthFused(t);
-    if (t_true >= faults.bad_goals_at && t_true < faults.bad_goals_at + 0.5 * dt)
+    if (t_true >= faults.bad_goals_at && t_true < faults.bad_goals_at + 0.5 * dt) {
       EXPECT_EQ(fsm->setGoals({{1e6, 0.0, 1.0}}), GoalStatus::kAccepted);  // refused at the next tick
+    }
     log.flown.push_back(vehicle.position);
     log.min_clearance = std::min(log.min_clearance, truth.query(vehicle.position).distance);
     log.duration_s = t_true;

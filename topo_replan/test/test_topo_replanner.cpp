@@ -8,6 +8,7 @@
 
 #include "topo_planner/plan_env/synthetic_scene.h"
 #include "topo_planner/topo_replan/topo_replanner.h"
+#include "clearance_checks.h"
 
 namespace topo_planner {
 namespace {
@@ -242,14 +243,7 @@ TEST(TopoReplanner, AStartInsideTheClearanceIsPlannedOutOfIt) {
   config.min_start_clearance_m = 0.2;
   const ReplanResult r = TopoReplanner::create(config, &err)->replan(map, req);
   ASSERT_EQ(r.status, ReplanStatus::kSuccess) << r.message;
-  bool out = false;
-  for (double t = 0.0; t <= r.trajectory.duration(); t += 0.01) {
-    const double d = map.query(r.trajectory.evaluate(t)).distance;
-    if (!out) EXPECT_GE(d, d0 - 0.011) << "t = " << t;
-    out = out || d >= config.optimizer.clearance_m;
-    if (out) EXPECT_GE(d, config.optimizer.clearance_m - 1e-3) << "t = " << t;
-  }
-  EXPECT_TRUE(out);
+  EXPECT_TRUE(movesOutOfTheClearance(r.trajectory, map, config.optimizer.clearance_m, 0.01, 1e-3));
   config.min_start_clearance_m = 0.23;
   EXPECT_EQ(TopoReplanner::create(config, &err)->replan(map, req).status, ReplanStatus::kStartInCollision);
 }
