@@ -99,6 +99,19 @@ struct FlightLog {
   bool braked = false;
 };
 
+// The map of every moment is `map` (a map known from the start).
+auto always(const EsdfMap& map) {
+  return [&map](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; };
+}
+
+// No depth frame fused in [from, to).
+Faults depthStale(double from, double to) {
+  Faults faults;
+  faults.depth_from = from;
+  faults.depth_to = to;
+  return faults;
+}
+
 // Flies from `start` at 20 Hz for at most `ticks` ticks; `mapAt(t)` gives the map of the moment.
 template <typename MapAt>
 FlightLog fly(ReplanFsm* fsm, const Eigen::Vector3d& start, const std::vector<Eigen::Vector3d>& goals, MapAt mapAt,
@@ -234,8 +247,7 @@ TEST(ReplanFsm, FliesAroundAPillarToTheGoal) {
   c.scene.pillar(12.0, 4.0, 0.6);
   const EsdfMap& map = c.scene.finish();
   auto fsm = makeFsm();
-  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
-                            600, map);
+  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, always(map), 600, map);
   EXPECT_TRUE(log.goal_reached);
   EXPECT_EQ(fsm->state(), FsmState::kWaitTarget);
   ASSERT_GE(log.trajectories.size(), 3u);  // the first one, then periodic replans along the reference
@@ -257,7 +269,7 @@ TEST(ReplanFsm, ReconfiguredLimitsApplyFromTheNextPlan) {
     for (const ExecTrajectory& t : log.trajectories) peak = std::max(peak, t.spline.maxVelocity());
     return peak;
   };
-  auto mapAt = [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; };
+  auto mapAt = always(map);
   const ReplanFsm::Config config = testConfig();
   auto fast = makeFsm(config);
   const FlightLog as_configured = fly(fast.get(), {1, 4, 1.5}, {{20, 4, 1.5}}, mapAt, 600, map);
@@ -642,7 +654,7 @@ const EsdfMap& notchAndWindowWall(Corridor* c) {
 TEST(ReplanFsm, ReroutesAroundWhereItStalled) {
   Corridor c;
   const EsdfMap& map = notchAndWindowWall(&c);
-  auto mapAt = [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; };
+  auto mapAt = always(map);
   for (const double progress_timeout_s : {5.0, 0.0}) {
     SCOPED_TRACE("progress_timeout_s " + std::to_string(progress_timeout_s));
     ReplanFsm::Config config = testConfig();
@@ -680,7 +692,7 @@ TEST(ReplanFsm, ReroutesAroundWhereItStalled) {
 TEST(ReplanFsm, AvoidsThePlaceItHeldAtAfterBackingOff) {
   Corridor c;
   const EsdfMap& map = notchAndWindowWall(&c);
-  auto mapAt = [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; };
+  auto mapAt = always(map);
   // Progress tracked (the zone lies ahead along the way; no remedy within the mission's time limit),
   // or not tracked (the zone is around the hold).
   const std::pair<double, double> cases[] = {{1.5, 100.0}, {1.5, 0.0}, {0.0, 100.0}};
@@ -728,7 +740,7 @@ TEST(ReplanFsm, KeepsToTheHeightBand) {
     return p.x() >= 10.0 && p.x() <= 10.4 && p.z() <= 2.0 && !window;
   });
   const EsdfMap& map = c.scene.finish();
-  auto mapAt = [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; };
+  auto mapAt = always(map);
   for (const double max_z : {2.2, 1e9}) {
     SCOPED_TRACE("max_z " + std::to_string(max_z));
     ReplanFsm::Config config = testConfig();
@@ -759,9 +771,7 @@ TEST(ReplanFsm, AGoalFoundInAnObstacleEndsTheMissionSayingWhy) {
   ReplanFsm::Config config = testConfig();
   config.depth_timeout_s = 0.5;
   auto fsm = makeFsm(config);
-  Faults faults;
-  faults.depth_from = 3.0;
-  faults.depth_to = 6.0;
+  Faults faults = depthStale(3.0, 6.0);
   const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}},
                             [&](double t, const Eigen::Vector3d&) -> const EsdfMap& { return t < 4.0 ? before : after; },
                             600, after, faults);
@@ -864,8 +874,7 @@ TEST(ReplanFsm, EscapesFromInsideTheClearanceThenFliesTheMission) {
   ASSERT_GT(d0, 0.1);
   ASSERT_LT(d0, testConfig().replanner.optimizer.clearance_m);
   auto fsm = makeFsm();
-  const FlightLog log = fly(fsm.get(), start, {{20, 4.5, 1.5}}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
-                            800, map);
+  const FlightLog log = fly(fsm.get(), start, {{20, 4.5, 1.5}}, always(map), 800, map);
   ASSERT_GE(log.events.size(), 2u);
   EXPECT_EQ(log.events.front().status, ReplanStatus::kStartInCollision);
   EXPECT_EQ(log.events.front().fallback, "escape");
@@ -885,8 +894,7 @@ TEST(ReplanFsm, EscapesFromInsideTheClearanceThenFliesTheMission) {
   config.max_escape_length_m = 0.0;
   config.mission_timeout_s = 3.0;
   auto stuck = makeFsm(config);
-  const FlightLog stuck_log = fly(stuck.get(), start, {{20, 4.5, 1.5}}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
-                                  100, map);
+  const FlightLog stuck_log = fly(stuck.get(), start, {{20, 4.5, 1.5}}, always(map), 100, map);
   EXPECT_FALSE(stuck_log.goal_reached);
   EXPECT_TRUE(stuck_log.trajectories.empty());
   EXPECT_EQ(stuck->state(), FsmState::kWaitTarget);
@@ -969,8 +977,7 @@ TEST(ReplanFsm, FliesSeededHighDensityForestsToTheirGoals) {
       config.replanner.optimizer.stretched_retry = variant.stretched_retry;
       config.replanner.optimizer.guide_phase_fallback = variant.stretched_retry;  // both after a refine in collision
       auto fsm = makeFsm(config);
-      const FlightLog log = fly(fsm.get(), start, {goal}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
-                                1200, map);
+      const FlightLog log = fly(fsm.get(), start, {goal}, always(map), 1200, map);
       EXPECT_TRUE(log.goal_reached) << "seed " << seed << ", " << variant.name;
       braked += log.braked;
       EXPECT_GT(log.min_clearance, config.safety_clearance_m) << "seed " << seed;
@@ -1192,8 +1199,7 @@ TEST(ReplanFsm, StartsFromAHoverThroughTheCamerasBlindZone) {
   const EsdfMap& truth = free_scene.scene.finish();
   ReplanFsm::Config config = testConfig();
   auto fsm = makeFsm(config);
-  const FlightLog log = fly(fsm.get(), start, {goal}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
-                            400, truth);
+  const FlightLog log = fly(fsm.get(), start, {goal}, always(map), 400, truth);
   EXPECT_TRUE(log.goal_reached);
   expectContinuous(log.trajectories, config.max_start_velocity_step_mps + 1e-6);
   std::printf("blind zone: goal reached in %.1f s, %zu trajectories\n", log.duration_s, log.trajectories.size());
@@ -1228,11 +1234,8 @@ TEST(ReplanFsm, BrakesToAHoverWhileDepthIsStaleAndResumes) {
   ReplanFsm::Config config = testConfig();
   config.depth_timeout_s = 0.5;
   auto fsm = makeFsm(config);
-  Faults faults;
-  faults.depth_from = 3.0;
-  faults.depth_to = 6.0;
-  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
-                            1200, map, faults);
+  Faults faults = depthStale(3.0, 6.0);
+  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, always(map), 1200, map, faults);
   EXPECT_TRUE(log.goal_reached);
   const ExecTrajectory* brake = nullptr;
   const FsmEvent* stop = nullptr;
@@ -1275,12 +1278,9 @@ TEST(ReplanFsm, GoalsRefusedAtAStopDoNotEndTheMission) {
   ReplanFsm::Config config = testConfig();
   config.depth_timeout_s = 0.5;
   auto fsm = makeFsm(config);
-  Faults faults;
-  faults.depth_from = 3.0;
-  faults.depth_to = 6.0;
+  Faults faults = depthStale(3.0, 6.0);
   faults.bad_goals_at = 6.0;  // the first tick with depth again: the FSM is stopped, at rest
-  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
-                            1200, map, faults);
+  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, always(map), 1200, map, faults);
   EXPECT_TRUE(log.goal_reached);
   EXPECT_EQ(fsm->lastGoalStatus(), GoalStatus::kGoalOutOfMap);  // what became of the newer goals
   for (const FsmEvent& e : log.events) EXPECT_NE(e.fallback, "give_up") << e.message;
@@ -1297,8 +1297,7 @@ TEST(ReplanFsm, BrakesWhenOdometryStopsAndResumes) {
   Faults faults;
   faults.odom_from = 3.0;
   faults.odom_to = 5.0;
-  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
-                            1200, map, faults);
+  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, always(map), 1200, map, faults);
   EXPECT_TRUE(log.goal_reached);
   const ExecTrajectory* brake = nullptr;
   for (const ExecTrajectory& t : log.trajectories)
@@ -1365,8 +1364,7 @@ TEST(ReplanFsm, HoldsAtTheMeasuredPositionAfterAnOdometryJump) {
   Faults faults;
   faults.odom_jump_at = 3.0;
   faults.odom_jump = Eigen::Vector3d(0.0, 1.0, 0.0);
-  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
-                            1200, map, faults);
+  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, always(map), 1200, map, faults);
   EXPECT_TRUE(log.goal_reached);
   size_t jump = 0;
   while (jump < log.trajectories.size() && !log.trajectories[jump].braking) ++jump;
@@ -1384,8 +1382,7 @@ TEST(ReplanFsm, HoldsAtTheMeasuredPositionAfterAnOdometryJump) {
   // Without the check (an unreachable threshold) no hold happens.
   config.max_tracking_error_m = 1e9;
   auto blind = makeFsm(config);
-  const FlightLog blind_log = fly(blind.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
-                                  120, map, faults);
+  const FlightLog blind_log = fly(blind.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, always(map), 120, map, faults);
   EXPECT_FALSE(blind_log.braked);
 }
 
@@ -1451,8 +1448,7 @@ TEST(ReplanFsm, TimeJumpsShiftTheTimingWithoutASetpointJump) {
     Faults faults;
     faults.clock_step_at = 3.0;
     faults.clock_step_s = step;
-    const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; },
-                              1200, map, faults);
+    const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, always(map), 1200, map, faults);
     EXPECT_TRUE(log.goal_reached) << step;
     EXPECT_EQ(fsm->timeJumps(), 1) << step;
     bool replanned = false;
@@ -1473,12 +1469,10 @@ TEST(ReplanFsm, RebuiltMissionsKeepOnlyTheGoalsNotReached) {
   ReplanFsm::Config config = testConfig();
   config.depth_timeout_s = 0.5;
   auto fsm = makeFsm(config);
-  Faults faults;  // depth stops after the first waypoint: a stop, then a rebuilt reference
-  faults.depth_from = 5.0;
-  faults.depth_to = 6.0;
+  Faults faults = depthStale(5.0, 6.0);  // depth stops after the first waypoint: a stop, then a rebuilt reference
   const Eigen::Vector3d first(6, 4, 1.5), last(16, 4, 1.5);
   const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {first, {11, 6, 1.5}, last},
-                            [&](double, const Eigen::Vector3d&) -> const EsdfMap& { return map; }, 1200, map, faults);
+                            always(map), 1200, map, faults);
   EXPECT_TRUE(log.goal_reached);
   ASSERT_TRUE(log.braked);
   // The reference rebuilt after the stop does not go back to the first goal.

@@ -81,6 +81,16 @@ UniformBspline accelerateAlongX(const Eigen::Vector3d& p0, double acc, double du
 
 bool stopping(Mode m) { return m == Mode::kEndStop || m == Mode::kWatchdogStop; }
 
+// n samples every kDt from *t, each after a heartbeat (the planner alive); *t ends past the last,
+// *sp is the last and sps gets each.
+void sampleWithHeartbeats(SetpointGenerator* gen, int n, double* t, Setpoint* sp, std::vector<Setpoint>* sps) {
+  for (int k = 0; k < n; ++k, *t += kDt) {
+    gen->noteHeartbeat(*t);
+    ASSERT_TRUE(gen->sample(*t, sp));
+    sps->push_back(*sp);
+  }
+}
+
 // Setpoints sampled every kDt never jump: each position step is within the speed times the period
 // (+ 1 mm); once stopping or holding, each velocity step is within stop_acc (+ kAccMargin) times the
 // period and (when jerk_mps3 > 0) each acceleration step within jerk_mps3 times the period.
@@ -529,13 +539,7 @@ TEST(SetpointGenerator, ALateTakeoverIsJudgedOnTheStepItMakesNow) {
   std::vector<Setpoint> sps;
   Setpoint sp;
   double t = 0.0;
-  auto run = [&](int n) {
-    for (int k = 0; k < n; ++k, t += kDt) {
-      gen.noteHeartbeat(t);
-      ASSERT_TRUE(gen.sample(t, &sp));
-      sps.push_back(sp);
-    }
-  };
+  auto run = [&](int n) { sampleWithHeartbeats(&gen, n, &t, &sp, &sps); };
   run(100);
   ASSERT_TRUE(gen.add(1, 1, t - 0.3, accelerateAlongX(p, 2.0, 2.0)));
   run(10);
@@ -567,13 +571,7 @@ TEST(SetpointGenerator, RefusesATakeoverThatWouldStepTheSetpoint) {
   std::vector<Setpoint> sps;
   Setpoint sp;
   double t = 0.0;
-  auto run = [&](int n) {
-    for (int k = 0; k < n; ++k, t += kDt) {
-      gen.noteHeartbeat(t);
-      ASSERT_TRUE(gen.sample(t, &sp));
-      sps.push_back(sp);
-    }
-  };
+  auto run = [&](int n) { sampleWithHeartbeats(&gen, n, &t, &sp, &sps); };
   run(100);
   // 0.3 m beside the setpoint: refused, and the server stops along a's path.
   ASSERT_TRUE(gen.add(1, 1, 1.05, constantVelocity(a.evaluate(1.05) + Eigen::Vector3d(0, 0.3, 0), {3, 0, 0}, 2.0)));
