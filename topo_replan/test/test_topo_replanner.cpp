@@ -19,6 +19,15 @@ PolynomialTrajectory straightReference(const Eigen::Vector3d& a, const Eigen::Ve
   return ref;
 }
 
+// A replan along ref from its state at t.
+ReplanRequest requestAlong(const PolynomialTrajectory& ref, double t = 0.0) {
+  ReplanRequest req;
+  req.start = ref.state(t);
+  req.reference = &ref;
+  req.reference_time_s = t;
+  return req;
+}
+
 TopoReplanner::Config deterministicConfig(int threads) {
   TopoReplanner::Config c;
   c.num_threads = threads;
@@ -45,9 +54,7 @@ TEST(TopoReplanner, PillarAcrossTheReference) {
   std::string err;
   auto replanner = TopoReplanner::create(deterministicConfig(2), &err);
   ASSERT_TRUE(replanner) << err;
-  ReplanRequest req;
-  req.start = ref.state(0.0);
-  req.reference = &ref;
+  ReplanRequest req = requestAlong(ref);
   const ReplanResult r = replanner->replan(map, req);
   ASSERT_EQ(r.status, ReplanStatus::kSuccess) << r.message;
   EXPECT_TRUE(r.stats.searched);
@@ -82,9 +89,7 @@ TEST(TopoReplanner, FreeReferenceIsKeptWithoutSearching) {
   const PolynomialTrajectory ref = straightReference({1, 4, 1.5}, {11, 4, 1.5});
   std::string err;
   auto replanner = TopoReplanner::create(deterministicConfig(2), &err);
-  ReplanRequest req;
-  req.start = ref.state(0.0);
-  req.reference = &ref;
+  ReplanRequest req = requestAlong(ref);
   const ReplanResult r = replanner->replan(map, req);
   ASSERT_EQ(r.status, ReplanStatus::kSuccess) << r.message;
   EXPECT_FALSE(r.stats.searched);
@@ -107,9 +112,7 @@ TEST(TopoReplanner, BadInputsGetTheirStatus) {
   std::string err;
   auto replanner = TopoReplanner::create(deterministicConfig(2), &err);
   const PolynomialTrajectory to_wall = straightReference({1, 4, 1.5}, {11, 4, 1.5});
-  ReplanRequest req;
-  req.reference = &to_wall;
-  req.start = to_wall.state(0.0);
+  ReplanRequest req = requestAlong(to_wall);
   EXPECT_EQ(replanner->replan(map, req).status, ReplanStatus::kGoalInCollision);
   const ReplanResult stopped = replanner->replan(map, req);
   EXPECT_NE(stopped.fallback, ReplanFallback::kNone);
@@ -167,9 +170,7 @@ TEST(TopoReplanner, PoolGivesTheSameResultAsOneWorker) {
   std::string err;
   auto one = TopoReplanner::create(deterministicConfig(1), &err);
   auto two = TopoReplanner::create(deterministicConfig(2), &err);
-  ReplanRequest req;
-  req.start = ref.state(0.0);
-  req.reference = &ref;
+  ReplanRequest req = requestAlong(ref);
   const ReplanResult a = one->replan(map, req), b = two->replan(map, req), c = two->replan(map, req);
   ASSERT_EQ(a.status, ReplanStatus::kSuccess) << a.message;
   ASSERT_EQ(b.status, ReplanStatus::kSuccess);
@@ -194,9 +195,7 @@ TEST(TopoReplanner, StartInsideTheSearchClearanceIsSearchedFromOutsideIt) {
   const Eigen::Vector3d start(1.0, 3.24, 1.5);  // 0.29 m from the wall (interpolated), voxel centre 0.30 m
   ASSERT_NEAR(map.query(start).distance, 0.29, 1e-6);
   const PolynomialTrajectory ref = straightReference(start, {11, 3.24, 1.5});
-  ReplanRequest req;
-  req.start = ref.state(0.0);
-  req.reference = &ref;
+  ReplanRequest req = requestAlong(ref);
   std::string err;
   auto replanner = TopoReplanner::create(config, &err);
   ASSERT_TRUE(replanner) << err;
@@ -234,9 +233,7 @@ TEST(TopoReplanner, AStartInsideTheClearanceIsPlannedOutOfIt) {
   ASSERT_GT(d0, 0.2);
   ASSERT_LT(d0, 0.25);
   const PolynomialTrajectory ref = straightReference(start, {11, 4.0, 1.5});
-  ReplanRequest req;
-  req.start = ref.state(0.0);
-  req.reference = &ref;
+  ReplanRequest req = requestAlong(ref);
   TopoReplanner::Config config = deterministicConfig(2);
   std::string err;
   EXPECT_EQ(TopoReplanner::create(config, &err)->replan(map, req).status, ReplanStatus::kStartInCollision);
@@ -260,9 +257,7 @@ TEST(TopoReplanner, LocalGoalSkipsPastAnObstacleRightBehindTheFirst) {
   config.horizon_m = 6.0;
   config.local_goal_margin_m = 1.0;
   const PolynomialTrajectory ref = straightReference({1, 4, 1.5}, {19, 4, 1.5});
-  ReplanRequest req;
-  req.start = ref.state(0.0);
-  req.reference = &ref;
+  ReplanRequest req = requestAlong(ref);
   std::string err;
   auto replanner = TopoReplanner::create(config, &err);
   ASSERT_TRUE(replanner) << err;
@@ -298,9 +293,7 @@ TEST(TopoReplanner, NoLocalGoalAboveTheHeightBand) {
   ASSERT_EQ(referenceTrajectory({{1, 4, 1.2}, {7, 4, 2.6}, {13, 4, 1.2}, {19, 4, 1.2}}, FlatState::atRest({1, 4, 1.2}),
                                 FlatState::atRest({19, 4, 1.2}), ReferenceConfig(), &ref),
             TrajectoryStatus::kSuccess);
-  ReplanRequest req;
-  req.start = ref.state(0.0);
-  req.reference = &ref;
+  ReplanRequest req = requestAlong(ref);
   std::string err;
   auto replanner = TopoReplanner::create(config, &err);
   ASSERT_TRUE(replanner) << err;
@@ -362,10 +355,7 @@ TEST(TopoReplanner, MovingStartsInHighDensityForests) {
     auto old_replanner = TopoReplanner::create(old_config, &err);
     ASSERT_TRUE(replanner && new_replanner && old_replanner) << err;
     for (double t = 2.0; t < ref.duration() - 3.0; t += 0.5) {
-      ReplanRequest req;
-      req.start = ref.state(t);
-      req.reference = &ref;
-      req.reference_time_s = t;
+      const ReplanRequest req = requestAlong(ref, t);
       bool clear = map.query(req.start.position).distance >= 0.4;
       for (double s = t; clear && s < std::min(ref.duration(), t + 3.0 / rc.max_vel_mps); s += 0.02)
         clear = map.query(ref.position(s)).distance >= 0.3;
@@ -393,9 +383,7 @@ TEST(TopoReplanner, RetryAttemptDrawsAnotherRoadmap) {
   std::string err;
   auto replanner = TopoReplanner::create(deterministicConfig(2), &err);
   ASSERT_TRUE(replanner) << err;
-  ReplanRequest req;
-  req.start = ref.state(0.0);
-  req.reference = &ref;
+  ReplanRequest req = requestAlong(ref);
   const ReplanResult first = replanner->replan(map, req);
   req.attempt = 1;
   const ReplanResult retry = replanner->replan(map, req), again = replanner->replan(map, req);
