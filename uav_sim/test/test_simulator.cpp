@@ -3,7 +3,8 @@
 //   1. the world comes up: latched global cloud, /clock, odometry hovering at the start;
 //   2. bad input (NaN position commands, rotor commands and odometry) is refused: the vehicle keeps
 //      hovering and the nodes keep running;
-//   3. a hover command 1 m above the start: odometry converges there (0.1 m) and stays;
+//   3. a hover command 1 m above the start: odometry converges there (0.1 m) and stays; rotor
+//      commands computed on odometry 0.1 s old are refused (the vehicle stays there);
 //   4. the depth camera: 640 x 480 32FC1 frames with finite depths, /camera/pose with the image's
 //      stamp, camera_info;
 //   5. a command into the nearest obstacle: /quadrotor/collision reports the contact, once while the
@@ -266,6 +267,33 @@ TEST_F(Simulator, HoversAtTheCommandedPoint) {
   ros::WallDuration(1.0).sleep();
   EXPECT_TRUE(settled()) << "at " << positionOf(latestOdom()).transpose();
   EXPECT_LT((positionOf(latestOdom()) - target).norm(), 0.05);
+}
+
+// Rotor commands computed on old odometry (a controller that lags the clock) are refused: the
+// rotor-level loop closed on a state 30 ms old diverges. These would drop the vehicle (every rotor
+// stopped), sent between the controller's answers; refused, the vehicle keeps hovering where it was,
+// and the simulator's status counts them.
+TEST_F(Simulator, StaleRotorCommandsAreRefused) {
+  auto latest = [] {
+    std::lock_guard<std::mutex> lock(obs.mutex);
+    return obs.sim_status.empty() ? diagnostic_msgs::DiagnosticStatus() : obs.sim_status.back();
+  };
+  const double stale0 = std::max(0.0, statusValue(latest(), "stale_commands"));
+  const Eigen::Vector3d here = positionOf(latestOdom());
+  topo_planner::RotorCommand stopped;  // all four rotors at 0 rad/s
+  double max_deviation = 0.0;
+  for (int k = 0; k < 200; ++k) {
+    const nav_msgs::Odometry o = latestOdom();
+    stopped.header.stamp = o.header.stamp - ros::Duration(0.1);
+    rotor_pub_.publish(stopped);
+    max_deviation = std::max(max_deviation, (positionOf(o) - here).norm());
+    ros::WallDuration(0.005).sleep();
+  }
+  EXPECT_LT(max_deviation, 0.05);
+  EXPECT_LT((positionOf(latestOdom()) - here).norm(), 0.05) << positionOf(latestOdom()).transpose();
+  diagnostic_msgs::DiagnosticStatus later;
+  ASSERT_TRUE(waitFor([&] { return statusValue(later = latest(), "stale_commands") >= stale0 + 150.0; }, 30.0))
+      << statusValue(later, "stale_commands") - stale0 << " stale commands counted";
 }
 
 // The lockstep controller (sim time): at each odometry message the clock waits for the controller's

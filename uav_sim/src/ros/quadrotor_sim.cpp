@@ -78,6 +78,8 @@ bool QuadrotorSim::Config::validate(std::string* why) const {
     err << "planner_max_lag_s must be in (0, 10]; ";
   if (!(finitePositive(command_timeout_s) && command_timeout_s <= 3600.0))
     err << "command_timeout_s must be in (0, 3600]; ";
+  if (!(finitePositive(max_command_age_s) && max_command_age_s <= 10.0))
+    err << "max_command_age_s must be in (0, 10]; ";
   if (!(finitePositive(collision_radius_m) && collision_radius_m <= 10.0))
     err << "collision_radius_m must be in (0, 10]; ";
   if (!std::isfinite(ground_z_m)) err << "ground_z_m must be finite; ";
@@ -135,6 +137,7 @@ bool readQuadrotorSimParams(const ros::NodeHandle& pnh, QuadrotorSim::Config* co
     c.perception_timeout_s *= wall_timeout_scale;
   }
   r.read("command_timeout_s", c.command_timeout_s);
+  r.read("max_command_age_s", c.max_command_age_s);
   std::string failsafe = c.failsafe == QuadrotorSim::Failsafe::kHold ? "hold" : "cut";
   r.read("failsafe", failsafe);
   if (failsafe == "hold")
@@ -280,19 +283,33 @@ void QuadrotorSim::commandCallback(const topo_planner::RotorCommandConstPtr& msg
     ROS_WARN_THROTTLE(1.0, "quadrotor_sim: refusing a rotor command with NaN/inf/negative speeds; keeping the last");
     return;
   }
+  double age_s = 0.0;
+  bool stale = false;
   {
     std::lock_guard<std::mutex> lock(command_mutex_);
-    command_ = w;
     // An answer to a stamp newer than any odometry published is one from before a backward clock
-    // step: it answers nothing the loop waits for now.
-    if (msg->header.stamp <= newest_published_) command_answers_ = msg->header.stamp;
-    command_step_ = current_step_.load();
-    have_command_ = true;
-    lockstep_suspended_ = false;
+    // step: it answers nothing the loop waits for now (and its age is not known: it is taken).
+    const ros::Time answers = msg->header.stamp;
+    if (answers <= newest_published_) {
+      command_answers_ = answers;
+      age_s = (newest_published_ - answers).toSec();
+      stale = !answers.isZero() && age_s > config_.max_command_age_s;
+    }
+    if (!stale) {
+      command_ = w;
+      command_step_ = current_step_.load();
+      have_command_ = true;
+    }
+    lockstep_suspended_ = false;  // the controller is alive: waiting for it lets it catch up
   }
   command_cv_.notify_all();
+  if (stale) {
+    ROS_WARN_THROTTLE(1.0, "quadrotor_sim: refusing a stale rotor command (computed on odometry %.0f ms old, more "
+                      "than max_command_age_s %.0f ms): the controller lags the clock", 1e3 * age_s,
+                      1e3 * config_.max_command_age_s);
+  }
   std::lock_guard<std::mutex> lock(stats_mutex_);
-  ++stats_.commands;
+  ++(stale ? stats_.stale_commands : stats_.commands);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -667,12 +684,12 @@ void QuadrotorSim::logStatus(double wall_s, uint64_t steps_in_period) {
   const double factor = steps_in_period * config_.step_s / wall_s;
   ROS_INFO(
       "quadrotor_sim: t %.1f s, real-time factor %.2f (asked %.2f), at (%.2f %.2f %.2f) %.2f m/s, "
-      "%u collisions, %lu commands (%lu refused), %lu lockstep waits (%lu in vain), %lu failsafes, %lu backlogs dropped, "
+      "%u collisions, %lu commands (%lu refused, %lu stale), %lu lockstep waits (%lu in vain), %lu failsafes, %lu backlogs dropped, "
       "%lu fault changes, %lu odometry messages dropped, %lu waits for the mapping (%lu in vain), %lu for the "
       "planner (%lu in vain)",
       stampOf(step_).toSec(), factor, config_.publish_clock ? config_.realtime_factor : 1.0, q.position.x(),
       q.position.y(), q.position.z(), q.velocity.norm(), s.collisions, (unsigned long)s.commands,
-      (unsigned long)s.bad_commands, (unsigned long)s.lockstep_waits, (unsigned long)s.lockstep_timeouts, (unsigned long)s.failsafe_events,
+      (unsigned long)s.bad_commands, (unsigned long)s.stale_commands, (unsigned long)s.lockstep_waits, (unsigned long)s.lockstep_timeouts, (unsigned long)s.failsafe_events,
       (unsigned long)s.lag_events, (unsigned long)s.fault_events, (unsigned long)s.odom_dropped,
       (unsigned long)s.perception_waits, (unsigned long)s.perception_timeouts, (unsigned long)s.planner_waits,
       (unsigned long)s.planner_timeouts);
@@ -694,6 +711,7 @@ void QuadrotorSim::logStatus(double wall_s, uint64_t steps_in_period) {
   add("realtime_factor", factor);
   add("collisions", s.collisions);
   add("commands", double(s.commands));
+  add("stale_commands", double(s.stale_commands));
   add("lockstep_waits", double(s.lockstep_waits));
   add("lockstep_timeouts", double(s.lockstep_timeouts));
   add("perception_waits", double(s.perception_waits));

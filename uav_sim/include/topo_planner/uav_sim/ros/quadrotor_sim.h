@@ -61,7 +61,13 @@
 // controller's position hold (an internal geometric controller keeps the position and heading of
 // the moment the commands stopped) until commands resume; `cut` drops the rotors to their minimum
 // speed (the vehicle falls; the crash shows up as a collision). NaN, infinite or negative rotor
-// speeds are refused (throttled warning) and the previous command stays.
+// speeds are refused (throttled warning) and the previous command stays. So is a stale command: one
+// that answers odometry more than max_command_age_s older than the newest the controller could
+// answer (a controller that lags the clock: a loaded machine on the wall clock, a lockstep wait that
+// timed out). The rotor-level loop closed over ROS diverges on a state 30 ms old (its attitude gains;
+// stable at 20 ms): a vehicle at 0.9 m/s reached 2 m/s at 30 ms and 16 m/s at 50 ms, where a flight
+// controller's own loop would never run late. Refused, it counts as silence, and the failsafe holds
+// the vehicle until fresh commands come back (a flight controller's offboard-loss failsafe).
 //
 // Faults (uav_sim/fault_schedule.h; faults/* parameters, none by default), at simulated times t =
 // seconds since the clock started (the physics clock, not moved by clock steps), or, with
@@ -91,7 +97,7 @@
 //   /sim/start_m, /sim/goals_m, /sim/map_resolution_m   the scenario (uav_sim/ros/truth_map.h)
 //   start_yaw_rad 0, step_s 0.001, odom_rate_hz 200, publish_clock (/use_sim_time), clock_start_s 1,
 //   realtime_factor 1, max_lag_s 0.05, lockstep true, lockstep_timeout_s 0.05, command_timeout_s 0.1,
-//   failsafe hold|cut, collision_radius_m 0.15, ground_z_m 0, odom_noise/position_m 0,
+//   max_command_age_s 0.025, failsafe hold|cut, collision_radius_m 0.15, ground_z_m 0, odom_noise/position_m 0,
 //   odom_noise/velocity_mps 0, odom_noise/seed 1, odom_delay_s 0, world_frame world, body_frame
 //   base_link, camera_frame camera_optical, camera_extrinsic/translation_m [0 0 0],
 //   camera_extrinsic/quaternion_xyzw [-0.5 0.5 -0.5 0.5], truth_map_margin_m 1.5, map_wait_s 30,
@@ -151,6 +157,7 @@ class QuadrotorSim {
     std::string planner_topic;            ///< planning ticks finished (std_msgs/Header); empty: no planner lockstep
     double planner_max_lag_s = 0.1;       ///< the clock leads the last planning tick by at most this [s]
     double command_timeout_s = 0.1;       ///< simulated time without commands before the failsafe [s]
+    double max_command_age_s = 0.025;     ///< a command answering odometry older than this is stale [s]
     Failsafe failsafe = Failsafe::kHold;  ///< what the vehicle does then
     double collision_radius_m = 0.15;     ///< body sphere radius [m]
     double ground_z_m = 0.0;              ///< height of the ground plane [m]
@@ -182,6 +189,7 @@ class QuadrotorSim {
     uint32_t collisions = 0;
     uint64_t commands = 0;      ///< rotor commands accepted
     uint64_t bad_commands = 0;  ///< refused (NaN/inf/negative)
+    uint64_t stale_commands = 0;  ///< refused: computed on odometry older than max_command_age_s
     uint64_t lockstep_waits = 0;     ///< odometry messages the clock waited to be answered for
     uint64_t lockstep_timeouts = 0;  ///< ... in vain
     uint64_t perception_waits = 0;     ///< times the clock waited for the mapping
