@@ -132,11 +132,20 @@ LocalProblem TopoReplanner::localProblem(const EsdfMap& map, const ReplanRequest
   const double dt = config_.reference_sample_s, T = ref.duration();
   auto bandExcess = [&](double z) { return heightBandExcess(z, config_.optimizer.min_z_m, config_.optimizer.max_z_m); };
   const double band_allowed = std::max(bandExcess(start.position.z()), bandExcess(ref.position(T).z())) + 1e-3;
+  // The final goal, at rest, may keep only the optimiser's clearance, as the start may: a goal beside
+  // an obstacle, accepted at the FSM's goal clearance, that the growing map (noise, drift) has since
+  // shown a few centimetres closer. Within max_search_start_offset_m of it the reference is held to
+  // the optimiser's clearance, and the search ends up the distance field from it (below).
+  const Eigen::Vector3d final_goal = ref.position(T);
   auto collides = [&](double t) {
     const Eigen::Vector3d p = ref.position(t);
     const DistanceQuery q = map.query(p);
-    return q.status == QueryStatus::kOutOfMap || q.status == QueryStatus::kInvalidInput ||
-           q.distance < config_.reference_clearance_m || !search_free.isFree(p) || bandExcess(p.z()) > band_allowed;
+    if (q.status == QueryStatus::kOutOfMap || q.status == QueryStatus::kInvalidInput ||
+        bandExcess(p.z()) > band_allowed)
+      return true;
+    if (config_.max_search_start_offset_m > 0.0 && (p - final_goal).norm() <= config_.max_search_start_offset_m)
+      return q.distance < config_.optimizer.clearance_m;
+    return q.distance < config_.reference_clearance_m || !search_free.isFree(p);
   };
   double arc = 0.0, t_h = t0, last_collision_s = -1.0;
   Eigen::Vector3d previous = start.position;
@@ -200,6 +209,14 @@ LocalProblem TopoReplanner::localProblem(const EsdfMap& map, const ReplanRequest
   if (map.query(lp.goal).status == QueryStatus::kOutOfMap)
     return fail(ReplanStatus::kGoalOutOfMap, "the local goal is outside the map");
   if (collides(t_g)) return fail(ReplanStatus::kGoalInCollision, "the reference is in collision up to its end");
+  lp.search_goal = lp.goal;
+  if (!search_free.isFree(lp.goal)) {  // the final goal, inside the search's clearance (above)
+    std::vector<Eigen::Vector3d> walk;
+    if (!ascendDistance(map, lp.goal, [&](const Eigen::Vector3d& p) { return search_free.isFree(p); },
+                        config_.max_search_start_offset_m, &walk))
+      return fail(ReplanStatus::kGoalInCollision, "the goal is inside the search's clearance with no way out of it");
+    lp.search_goal = walk.back();
+  }
 
   // The initial trajectory: the reference segment from the start to the local goal as a B-spline,
   // about one control point per control_point_spacing_m. A start off the reference (after a detour)
@@ -324,13 +341,16 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
   // Guide paths: the topological search.
   result.stats.searched = true;
   auto t_search = std::chrono::steady_clock::now();
-  // Guides from a moved search start begin at the start itself.
+  // Guides from a moved search start begin at the start itself; to a moved search goal, they end at
+  // the goal itself.
   auto fromStart = [&](std::vector<Path> paths) {
-    if (lp.search_start != lp.start)
-      for (Path& path : paths) path.insert(path.begin(), lp.start);
+    for (Path& path : paths) {
+      if (lp.search_start != lp.start) path.insert(path.begin(), lp.start);
+      if (lp.search_goal != lp.goal) path.push_back(lp.goal);
+    }
     return paths;
   };
-  const TopoSearchResult search = search_.search(map, lp.search_start, lp.goal, request.attempt);
+  const TopoSearchResult search = search_.search(map, lp.search_start, lp.search_goal, request.attempt);
   result.stats.search = search.stats;
   result.roadmap = search.roadmap;
   result.stats.search_ms = msSince(t_search);
@@ -389,7 +409,7 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
   // Last resort, when the search found nothing or no candidate passed: one A* guide.
   if (result.chosen < 0) {
     t_search = std::chrono::steady_clock::now();
-    const GridAStar::Result astar = astar_.search(map, lp.search_start, lp.goal);
+    const GridAStar::Result astar = astar_.search(map, lp.search_start, lp.search_goal);
     result.stats.search_ms += msSince(t_search);
     if (astar.status == SearchStatus::kSuccess) {
       const VisibilityChecker checker(map, config_.astar.clearance_m, config_.astar.unknown_is_free);

@@ -219,6 +219,47 @@ TEST(TopoReplanner, StartInsideTheSearchClearanceIsSearchedFromOutsideIt) {
   EXPECT_EQ(strict->replan(map, req).status, ReplanStatus::kStartInCollision);
 }
 
+// A final goal 0.28 m from a wall: inside the reference's clearance (0.3 m) and the search's (0.4 m
+// here, as the start's test has it), but keeping the optimiser's (0.25 m). A goal accepted beside an obstacle can be seen this much closer
+// on the final approach (a forest flight with realistic sensing failed 94 calls in a row there: "the
+// reference is in collision up to its end"). The search ends up the distance field from it, the
+// guides end at the goal, and so does the plan. With max_search_start_offset_m 0 it is
+// kGoalInCollision, as before.
+TEST(TopoReplanner, AFinalGoalInsideTheSearchClearanceIsReached) {
+  SyntheticScene scene({12.0, 8.0, 3.0});
+  scene.box({11.0, 0.0, -1.0}, {12.0, 8.0, 4.0});  // a wall behind the goal
+  scene.pillar(6.0, 4.0, 0.5);                      // across the reference
+  const EsdfMap& map = scene.finish();
+  const Eigen::Vector3d start(1.0, 4.0, 1.5), goal(10.77, 4.0, 1.5);
+  const double d = map.query(goal).distance;
+  ASSERT_GT(d, 0.25);
+  ASSERT_LT(d, 0.3);
+  const PolynomialTrajectory ref = straightReference(start, goal);
+  const ReplanRequest req = requestAlong(ref);
+  TopoReplanner::Config config = deterministicConfig(2);
+  config.search.clearance_m = config.astar.clearance_m = 0.4;  // the goal's voxel centre is 0.3 m away
+  std::string err;
+  auto replanner = TopoReplanner::create(config, &err);
+  ASSERT_TRUE(replanner) << err;
+  const LocalProblem lp = replanner->localProblem(map, req);
+  ASSERT_EQ(lp.status, ReplanStatus::kSuccess) << lp.message;
+  EXPECT_LT((lp.goal - goal).norm(), 1e-9);
+  EXPECT_LT(lp.search_goal.x(), goal.x() - 0.005);  // moved away from the wall ...
+  EXPECT_LE((lp.search_goal - goal).norm(), config.max_search_start_offset_m + 1e-9);  // ... not far
+  const ReplanResult r = replanner->replan(map, req);
+  ASSERT_EQ(r.status, ReplanStatus::kSuccess) << r.message;
+  ASSERT_FALSE(r.candidates.empty());
+  for (const ReplanCandidate& c : r.candidates) {
+    ASSERT_GE(c.guide.size(), 2u);
+    EXPECT_LT((c.guide.back() - goal).norm(), 1e-9);
+    EXPECT_EQ(c.guide[c.guide.size() - 2], lp.search_goal);
+  }
+  EXPECT_LT((r.trajectory.evaluate(r.trajectory.duration()) - goal).norm(), 1e-3);
+
+  config.max_search_start_offset_m = 0.0;
+  EXPECT_EQ(TopoReplanner::create(config, &err)->replan(map, req).status, ReplanStatus::kGoalInCollision);
+}
+
 // A start 0.22 m from a wall (the map grew beside the trajectory being flown: a flight kept its
 // trajectory at 0.21 m after failed plans, and seven calls in a row were kStartInCollision until it
 // stopped and escaped) is planned from when min_start_clearance_m allows it, and the plan moves

@@ -82,6 +82,11 @@ struct LocalProblem {
   /// paths then begin with the start itself).
   Eigen::Vector3d search_start = Eigen::Vector3d::Zero();
   Eigen::Vector3d goal = Eigen::Vector3d::Zero();
+  /// Where the guide search ends: the goal, or, when the goal is the final one and keeps the
+  /// optimiser's clearance but not the search's (a goal beside an obstacle that the map now shows a
+  /// little closer than when it was accepted), the first point up the distance field that keeps the
+  /// search's (the guide paths then end with the goal itself).
+  Eigen::Vector3d search_goal = Eigen::Vector3d::Zero();
   double start_time_s = 0.0;           ///< reference time of the local start
   double goal_time_s = 0.0;            ///< reference time of the local goal
   double collision_time_s = -1.0;      ///< first colliding reference time in the horizon; -1 if none
@@ -170,6 +175,9 @@ class TopoReplanner {
     /// A start that keeps the optimiser's clearance but not the search's (a trajectory may pass an
     /// obstacle closer than the search's clearance, and replanning starts on it) is moved up the
     /// distance field at most this far for the search [m]. 0: such a start is kStartInCollision.
+    /// The same holds for the final goal (the reference's end): within this distance of it, the
+    /// reference is held to the optimiser's clearance rather than reference_clearance_m and the
+    /// search's, and the search ends up the distance field from it.
     double max_search_start_offset_m = 0.3;
     /// A start closer to an obstacle than the smaller of this and the optimiser's clearance is
     /// kStartInCollision (by default the optimiser's clearance). A start between the two (the map
