@@ -436,9 +436,13 @@ TEST_F(Simulator, FlyingIntoAnObstacleIsACollision) {
 // mapping or the planner). A first report arms it: the clock stops `lag` past it (or at once, if the
 // report arrived later than that). Held there, a report lag - 0.1 s before the held time lets the clock
 // run exactly 0.1 s on (and one odometry batch, 5 ms), where it waits again; with no report for
-// perception_timeout_s of wall time it runs on (a dead planner does not stop the clock).
+// perception_timeout_s of wall time it runs on (a dead planner does not stop the clock). Msg: a
+// std_msgs/Header, or a message with a header (the setpoints).
+ros::Time& reportStamp(std_msgs::Header* h) { return h->stamp; }
+ros::Time& reportStamp(topo_planner::PositionCommand* c) { return c->header.stamp; }
+template <typename Msg>
 void expectClockHeldBy(ros::NodeHandle* nh, const std::string& topic, double lag) {
-  ros::Publisher reports = nh->advertise<std_msgs::Header>(topic, 10);
+  ros::Publisher reports = nh->advertise<Msg>(topic, 10);
   ASSERT_TRUE(waitFor([&] { return reports.getNumSubscribers() > 0; }, 10.0)) << "the simulator does not listen";
   // The clock when it has not moved for 0.3 s of wall time (NaN while it moves).
   auto heldClock = [] {
@@ -447,15 +451,15 @@ void expectClockHeldBy(ros::NodeHandle* nh, const std::string& topic, double lag
     const double b = ros::Time::now().toSec();
     return a == b ? b : NAN;
   };
-  std_msgs::Header report;
-  report.stamp = ros::Time::now();
+  Msg report;
+  reportStamp(&report) = ros::Time::now();
   reports.publish(report);
-  const double t0 = report.stamp.toSec();
+  const double t0 = reportStamp(&report).toSec();
   double held = NAN;
   ASSERT_TRUE(waitFor([&] { return !std::isnan(held = heldClock()); }, 10.0)) << "the clock never stopped";
   EXPECT_GE(held, t0 + lag - 1e-6);
   // Held: a report `lag` - 0.1 s before the held time releases 0.1 s.
-  report.stamp = ros::Time(held - lag + 0.1);
+  reportStamp(&report) = ros::Time(held - lag + 0.1);
   reports.publish(report);
   double again = NAN;
   ASSERT_TRUE(waitFor([&] { return !std::isnan(again = heldClock()) && again > held; }, 10.0)) << "not released";
@@ -469,14 +473,22 @@ void expectClockHeldBy(ros::NodeHandle* nh, const std::string& topic, double lag
 // perception_max_lag_s 0.2 s). After the other cases, which run unheld.
 TEST_F(Simulator, TheClockWaitsForTheMappingToFuseDepth) {
   if (!ros::Time::isSimTime()) GTEST_SKIP() << "the perception lockstep runs in sim time only";
-  expectClockHeldBy(nh_, "/test/depth_fused", 0.2);
+  expectClockHeldBy<std_msgs::Header>(nh_, "/test/depth_fused", 0.2);
 }
 
 // The planner lockstep: the planner's ticks finished (planner_topic /test/planner_tick,
 // planner_max_lag_s 0.1 s). The perception lockstep timed out above and stays suspended.
 TEST_F(Simulator, TheClockWaitsForThePlannersTicks) {
   if (!ros::Time::isSimTime()) GTEST_SKIP() << "the planner lockstep runs in sim time only";
-  expectClockHeldBy(nh_, "/test/planner_tick", 0.1);
+  expectClockHeldBy<std_msgs::Header>(nh_, "/test/planner_tick", 0.1);
+}
+
+// The setpoint lockstep: the trajectory server's setpoints (setpoint_topic /test/setpoints,
+// setpoint_max_lag_s 0.02 s; in a flight, the stream the controller tracks). The two locksteps above
+// timed out and stay suspended.
+TEST_F(Simulator, TheClockWaitsForTheSetpoints) {
+  if (!ros::Time::isSimTime()) GTEST_SKIP() << "the setpoint lockstep runs in sim time only";
+  expectClockHeldBy<topo_planner::PositionCommand>(nh_, "/test/setpoints", 0.02);
 }
 
 }  // namespace

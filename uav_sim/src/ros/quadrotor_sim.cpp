@@ -7,6 +7,7 @@
 #include <std_msgs/Bool.h>
 #include <std_msgs/String.h>
 #include <topo_planner/Collision.h>
+#include <topo_planner/PositionCommand.h>
 
 #include <cmath>
 #include <cstdio>
@@ -76,6 +77,8 @@ bool QuadrotorSim::Config::validate(std::string* why) const {
     err << "perception_timeout_s must be in (0, 60]; ";
   if (!(finitePositive(planner_max_lag_s) && planner_max_lag_s <= 10.0))
     err << "planner_max_lag_s must be in (0, 10]; ";
+  if (!(finitePositive(setpoint_max_lag_s) && setpoint_max_lag_s <= 10.0))
+    err << "setpoint_max_lag_s must be in (0, 10]; ";
   if (!(finitePositive(command_timeout_s) && command_timeout_s <= 3600.0))
     err << "command_timeout_s must be in (0, 3600]; ";
   if (!(finitePositive(max_command_age_s) && max_command_age_s <= 10.0))
@@ -126,6 +129,8 @@ bool readQuadrotorSimParams(const ros::NodeHandle& pnh, QuadrotorSim::Config* co
   r.read("perception_timeout_s", c.perception_timeout_s);
   r.read("planner_topic", c.planner_topic);
   r.read("planner_max_lag_s", c.planner_max_lag_s);
+  r.read("setpoint_topic", c.setpoint_topic);
+  r.read("setpoint_max_lag_s", c.setpoint_max_lag_s);
   // The wall-clock waits of both locksteps stretch by this (make test-asan / test-tsan: every node
   // runs several times slower; the simulated flight is the same).
   double wall_timeout_scale = 1.0;
@@ -229,16 +234,20 @@ std::unique_ptr<QuadrotorSim> QuadrotorSim::create(const ros::NodeHandle& nh, co
   s.command_sub_ = command_nh.subscribe("controller/rotor_command", 10, &QuadrotorSim::commandCallback, &s,
                                         ros::TransportHints().tcpNoDelay());
   // The mapping's frames fused, on the same queue (the loop may be waiting for them: perception lockstep).
-  // And the planner's ticks (planner lockstep).
+  // And the planner's ticks (planner lockstep), and the trajectory server's setpoints (setpoint lockstep).
   auto subscribeReports = [&](const std::string& topic, Source source) {
     return command_nh.subscribe<std_msgs::Header>(
-        topic, 10, [&s, source](const std_msgs::HeaderConstPtr& msg) { s.reportCallback(source, msg); },
+        topic, 10, [&s, source](const std_msgs::HeaderConstPtr& msg) { s.reportCallback(source, msg->stamp); },
         ros::VoidConstPtr(), ros::TransportHints().tcpNoDelay());
   };
-  if (config.publish_clock && config.lockstep && !config.perception_topic.empty())
-    s.fused_sub_ = subscribeReports(config.perception_topic, kMapping);
-  if (config.publish_clock && config.lockstep && !config.planner_topic.empty())
-    s.planner_sub_ = subscribeReports(config.planner_topic, kPlanner);
+  const bool locksteps = config.publish_clock && config.lockstep;
+  if (locksteps && !config.perception_topic.empty()) s.fused_sub_ = subscribeReports(config.perception_topic, kMapping);
+  if (locksteps && !config.planner_topic.empty()) s.planner_sub_ = subscribeReports(config.planner_topic, kPlanner);
+  if (locksteps && !config.setpoint_topic.empty())
+    s.setpoint_sub_ = command_nh.subscribe<topo_planner::PositionCommand>(
+        config.setpoint_topic, 10,
+        [&s](const topo_planner::PositionCommandConstPtr& msg) { s.reportCallback(kSetpoints, msg->header.stamp); },
+        ros::VoidConstPtr(), ros::TransportHints().tcpNoDelay());
   s.command_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &s.command_queue_);
   s.command_spinner_->start();
   ROS_INFO("quadrotor_sim: start (%.2f %.2f %.2f) hovering, %.0f Hz odometry, %s, collision radius %.2f m",
@@ -396,7 +405,7 @@ void QuadrotorSim::loop() {
     }
     const ros::Time published = publishOdometry();
     if (config_.publish_clock && config_.lockstep && !published.isZero()) waitForReply(published);
-    if (fused_sub_ || planner_sub_) waitForPerception(stampOf(step_));
+    if (fused_sub_ || planner_sub_ || setpoint_sub_) waitForPerception(stampOf(step_));
 
     const auto wall = SteadyClock::now();
     const double period = std::chrono::duration<double>(wall - status_wall).count();
@@ -637,28 +646,39 @@ void QuadrotorSim::waitForReply(const ros::Time& odom_stamp) {
                     odom_stamp.toSec(), 1e3 * config_.lockstep_timeout_s);
 }
 
-void QuadrotorSim::reportCallback(Source source, const std_msgs::HeaderConstPtr& msg) {
-  if (msg->stamp.isZero()) return;
+void QuadrotorSim::reportCallback(Source source, const ros::Time& stamp) {
+  if (stamp.isZero()) return;
   {
     std::lock_guard<std::mutex> lock(perception_mutex_);
     // The latest, not the largest: after a backward clock step the reports are stamped earlier.
-    reported_[source] = msg->stamp;
+    reported_[source] = stamp;
     suspended_[source] = false;
   }
   perception_cv_.notify_all();
 }
 
 void QuadrotorSim::waitForPerception(const ros::Time& clock) {
-  for (const Source source : {kMapping, kPlanner}) {
+  struct Lockstep {
+    double lag_s;
+    uint64_t Stats::*waits;
+    uint64_t Stats::*timeouts;
+    const char* awaited;
+  };
+  static_assert(kNumSources == 3, "a lockstep per source");
+  const Lockstep locksteps[kNumSources] = {
+      {config_.perception_max_lag_s, &Stats::perception_waits, &Stats::perception_timeouts, "depth frame fused"},
+      {config_.planner_max_lag_s, &Stats::planner_waits, &Stats::planner_timeouts, "planning tick finished"},
+      {config_.setpoint_max_lag_s, &Stats::setpoint_waits, &Stats::setpoint_timeouts, "setpoint"}};
+  for (const Source source : {kMapping, kPlanner, kSetpoints}) {
+    const Lockstep& ls = locksteps[source];
     std::unique_lock<std::mutex> lock(perception_mutex_);
     // Not before the first report, nor while the camera is blacked out (no frame will come).
     if (reported_[source].isZero() || suspended_[source] || (source == kMapping && depth_blackout_)) continue;
-    const double lag = source == kMapping ? config_.perception_max_lag_s : config_.planner_max_lag_s;
-    const ros::Time due = clock - ros::Duration(lag);
+    const ros::Time due = clock - ros::Duration(ls.lag_s);
     if (reported_[source] >= due) continue;
     {
       std::lock_guard<std::mutex> stats_lock(stats_mutex_);
-      ++(source == kMapping ? stats_.perception_waits : stats_.planner_waits);
+      ++(stats_.*ls.waits);
     }
     const bool caught_up = perception_cv_.wait_for(lock, std::chrono::duration<double>(config_.perception_timeout_s),
                                                    [&] { return stop_ || reported_[source] >= due; });
@@ -668,12 +688,12 @@ void QuadrotorSim::waitForPerception(const ros::Time& clock) {
     lock.unlock();
     {
       std::lock_guard<std::mutex> stats_lock(stats_mutex_);
-      ++(source == kMapping ? stats_.perception_timeouts : stats_.planner_timeouts);
+      ++(stats_.*ls.timeouts);
     }
     ROS_WARN_THROTTLE(5.0,
                       "quadrotor_sim: no %s after %.3f within %.1f s (wall; the last one %.3f): running on without "
                       "waiting until the next one",
-                      source == kMapping ? "depth frame fused" : "planning tick finished", due.toSec(),
+                      ls.awaited, due.toSec(),
                       config_.perception_timeout_s, last);
   }
 }
@@ -686,13 +706,13 @@ void QuadrotorSim::logStatus(double wall_s, uint64_t steps_in_period) {
       "quadrotor_sim: t %.1f s, real-time factor %.2f (asked %.2f), at (%.2f %.2f %.2f) %.2f m/s, "
       "%u collisions, %lu commands (%lu refused, %lu stale), %lu lockstep waits (%lu in vain), %lu failsafes, %lu backlogs dropped, "
       "%lu fault changes, %lu odometry messages dropped, %lu waits for the mapping (%lu in vain), %lu for the "
-      "planner (%lu in vain)",
+      "planner (%lu in vain), %lu for setpoints (%lu in vain)",
       stampOf(step_).toSec(), factor, config_.publish_clock ? config_.realtime_factor : 1.0, q.position.x(),
       q.position.y(), q.position.z(), q.velocity.norm(), s.collisions, (unsigned long)s.commands,
       (unsigned long)s.bad_commands, (unsigned long)s.stale_commands, (unsigned long)s.lockstep_waits, (unsigned long)s.lockstep_timeouts, (unsigned long)s.failsafe_events,
       (unsigned long)s.lag_events, (unsigned long)s.fault_events, (unsigned long)s.odom_dropped,
       (unsigned long)s.perception_waits, (unsigned long)s.perception_timeouts, (unsigned long)s.planner_waits,
-      (unsigned long)s.planner_timeouts);
+      (unsigned long)s.planner_timeouts, (unsigned long)s.setpoint_waits, (unsigned long)s.setpoint_timeouts);
   // The same on ~status (the counters since the start), for tests and benchmarks.
   diagnostic_msgs::DiagnosticStatus status;
   status.name = "quadrotor_sim";
@@ -718,6 +738,8 @@ void QuadrotorSim::logStatus(double wall_s, uint64_t steps_in_period) {
   add("perception_timeouts", double(s.perception_timeouts));
   add("planner_waits", double(s.planner_waits));
   add("planner_timeouts", double(s.planner_timeouts));
+  add("setpoint_waits", double(s.setpoint_waits));
+  add("setpoint_timeouts", double(s.setpoint_timeouts));
   status_pub_.publish(status);
   if (config_.publish_clock && factor < 0.8 * config_.realtime_factor)
     ROS_WARN(

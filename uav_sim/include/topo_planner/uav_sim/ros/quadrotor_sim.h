@@ -55,6 +55,14 @@
 // clock leads the last one by at most planner_max_lag_s (two ticks), so a plan that takes long in
 // wall time (a sanitizer's slowdown) does not come late in simulated time. Same timeout and suspension.
 //
+// Setpoint lockstep (the same, `setpoint_topic` set: simulation.launch sets the trajectory server's
+// topo_planner/PositionCommand stream). The clock leads the newest setpoint by at most
+// setpoint_max_lag_s (two 100 Hz periods), so the controller never tracks a setpoint that the clock
+// has left behind: without it, a trajectory server starved of CPU for a moment (the planner's
+// threads and the mapping on a 2-core machine) left the controller holding a setpoint up to 0.19 s of
+// simulated time old, 0.5 m behind a vehicle at 2.7 m/s, and then jumping forward. Same timeout and
+// suspension (a stopped server does not slow the clock to a crawl).
+//
 // Commands. Before the first command the rotors hold hover speed (the vehicle hangs still at the
 // start). A command is held (zero-order hold) until the next one; when none arrives for
 // command_timeout_s of simulated time, the failsafe takes over: `hold` (default) emulates a flight
@@ -156,6 +164,8 @@ class QuadrotorSim {
     double perception_timeout_s = 2.0;    ///< longest wait for the next frame fused or planning tick (wall) [s]
     std::string planner_topic;            ///< planning ticks finished (std_msgs/Header); empty: no planner lockstep
     double planner_max_lag_s = 0.1;       ///< the clock leads the last planning tick by at most this [s]
+    std::string setpoint_topic;           ///< the setpoints (topo_planner/PositionCommand); empty: no setpoint lockstep
+    double setpoint_max_lag_s = 0.02;     ///< the clock leads the newest setpoint by at most this [s]
     double command_timeout_s = 0.1;       ///< simulated time without commands before the failsafe [s]
     double max_command_age_s = 0.025;     ///< a command answering odometry older than this is stale [s]
     Failsafe failsafe = Failsafe::kHold;  ///< what the vehicle does then
@@ -196,6 +206,8 @@ class QuadrotorSim {
     uint64_t perception_timeouts = 0;  ///< ... in vain
     uint64_t planner_waits = 0;        ///< times the clock waited for the planner
     uint64_t planner_timeouts = 0;     ///< ... in vain
+    uint64_t setpoint_waits = 0;       ///< times the clock waited for the trajectory server's setpoints
+    uint64_t setpoint_timeouts = 0;    ///< ... in vain
     uint64_t failsafe_events = 0;
     uint64_t lag_events = 0;  ///< backlogs dropped
     uint64_t fault_events = 0;      ///< fault changes applied (starts, ends, jumps, steps)
@@ -222,10 +234,11 @@ class QuadrotorSim {
   /// estimate's when published, else the newest odometry's (zero if none).
   ros::Time publishOdometry();
   void waitForReply(const ros::Time& odom_stamp);
-  /// A report of the mapping (kMapping) or the planner (kPlanner): caught up with `stamp`.
-  enum Source { kMapping = 0, kPlanner = 1 };
-  void reportCallback(Source source, const std_msgs::HeaderConstPtr& msg);
-  /// The perception and planner locksteps: waits for each armed source to report within its lag.
+  /// A report of the mapping (kMapping), the planner (kPlanner) or the trajectory server (kSetpoints, its
+  /// setpoints' stamps): caught up with `stamp`.
+  enum Source { kMapping = 0, kPlanner = 1, kSetpoints = 2, kNumSources = 3 };
+  void reportCallback(Source source, const ros::Time& stamp);
+  /// The perception, planner and setpoint locksteps: waits for each armed source to report within its lag.
   void waitForPerception(const ros::Time& clock);
   void publishClock();
   /// Applies the faults whose changes fall in (t0_s, t1_s] of simulated time (loop thread).
@@ -273,8 +286,8 @@ class QuadrotorSim {
   // Perception and planner lockstep state, written by the report callbacks (the command queue's thread).
   std::mutex perception_mutex_;
   std::condition_variable perception_cv_;
-  ros::Time reported_[2];            // stamp of the last report per Source (zero: none yet)
-  bool suspended_[2] = {false, false};
+  ros::Time reported_[kNumSources];  // stamp of the last report per Source (zero: none yet)
+  bool suspended_[kNumSources] = {false, false, false};
   bool depth_blackout_ = false;      // inside a depth blackout fault (the loop's thread)
 
   mutable std::mutex stats_mutex_;
@@ -283,7 +296,7 @@ class QuadrotorSim {
   std::unique_ptr<TruthMapSubscriber> truth_;
   ros::CallbackQueue command_queue_;
   std::unique_ptr<ros::AsyncSpinner> command_spinner_;
-  ros::Subscriber command_sub_, fused_sub_, planner_sub_;
+  ros::Subscriber command_sub_, fused_sub_, planner_sub_, setpoint_sub_;
   ros::Publisher odom_pub_, truth_pub_, fc_odom_pub_, collision_pub_, clock_pub_;
   ros::Publisher depth_blackout_pub_, odom_offset_pub_, fault_event_pub_, status_pub_;
   tf2_ros::TransformBroadcaster tf_broadcaster_;
