@@ -131,7 +131,7 @@ bool readQuadrotorSimParams(const ros::NodeHandle& pnh, QuadrotorSim::Config* co
   r.read("planner_max_lag_s", c.planner_max_lag_s);
   r.read("setpoint_topic", c.setpoint_topic);
   r.read("setpoint_max_lag_s", c.setpoint_max_lag_s);
-  // The wall-clock waits of both locksteps stretch by this (make test-asan / test-tsan: every node
+  // The wall-clock waits of the locksteps stretch by this (make test-asan / test-tsan: every node
   // runs several times slower; the simulated flight is the same).
   double wall_timeout_scale = 1.0;
   r.read("wall_timeout_scale", wall_timeout_scale);

@@ -161,7 +161,7 @@ class QuadrotorSim {
     double lockstep_timeout_s = 0.05;     ///< longest wait for that answer (wall) [s]
     std::string perception_topic;         ///< depth frames fused (std_msgs/Header); empty: no perception lockstep
     double perception_max_lag_s = 0.2;    ///< the clock leads the last frame fused by at most this [s]
-    double perception_timeout_s = 2.0;    ///< longest wait for the next frame fused or planning tick (wall) [s]
+    double perception_timeout_s = 2.0;    ///< longest wait for the next frame fused, planning tick or setpoint (wall) [s]
     std::string planner_topic;            ///< planning ticks finished (std_msgs/Header); empty: no planner lockstep
     double planner_max_lag_s = 0.1;       ///< the clock leads the last planning tick by at most this [s]
     std::string setpoint_topic;           ///< the setpoints (topo_planner/PositionCommand); empty: no setpoint lockstep
@@ -283,7 +283,7 @@ class QuadrotorSim {
   bool lockstep_suspended_ = false;
   std::atomic<uint64_t> current_step_{0};
 
-  // Perception and planner lockstep state, written by the report callbacks (the command queue's thread).
+  // Perception, planner and setpoint lockstep state, written by the report callbacks (the command queue's thread).
   std::mutex perception_mutex_;
   std::condition_variable perception_cv_;
   ros::Time reported_[kNumSources];  // stamp of the last report per Source (zero: none yet)
