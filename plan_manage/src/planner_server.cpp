@@ -518,6 +518,8 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("fsm/server_position_tolerance_m", f.server_position_tolerance_m);
   r.read("fsm/waypoint_reached_radius_m", f.waypoint_reached_radius_m);
   r.read("fsm/reroute_after_failures", f.reroute_after_failures);
+  r.read("fsm/route_check_length_m", f.route_check_length_m);
+  r.read("fsm/route_check_interval_s", f.route_check_interval_s);
   r.read("fsm/backoff_length_m", f.backoff_length_m);
   r.read("fsm/max_backoff_length_m", f.max_backoff_length_m);
   r.read("fsm/backoff_speed_mps", f.backoff_speed_mps);

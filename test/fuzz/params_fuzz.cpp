@@ -122,6 +122,8 @@ void fuzzPlanner(FuzzInput& in) {
   f.waypoint_reached_radius_m = in.number(f.waypoint_reached_radius_m);
   f.global_route = in.flag();
   f.reroute_after_failures = in.integer(f.reroute_after_failures);
+  f.route_check_length_m = in.number(f.route_check_length_m);
+  f.route_check_interval_s = in.number(f.route_check_interval_s);
   f.backoff_length_m = in.number(f.backoff_length_m);
   f.max_backoff_length_m = in.number(f.max_backoff_length_m);
   f.backoff_speed_mps = in.number(f.backoff_speed_mps);

@@ -198,6 +198,10 @@ bool ReplanFsm::Config::validate(std::string* why) const {
   if (max_plan_failures < 1) return bad("max_plan_failures must be >= 1");
   if (!route.validate(&sub)) return bad(sub);
   if (reroute_after_failures < 1) return bad("reroute_after_failures must be >= 1");
+  if (!(route_check_length_m >= 0.0) || !std::isfinite(route_check_length_m))
+    return bad("route_check_length_m must be >= 0 (0: off)");
+  if (!(route_check_interval_s >= 0.0) || !std::isfinite(route_check_interval_s))
+    return bad("route_check_interval_s must be >= 0");
   if (!(rest_retry_interval_s >= 0.0 && rest_retry_interval_s <= 10.0))
     return bad("rest_retry_interval_s must be in [0, 10] s");
   if (!(moving_retry_interval_s >= 0.0 && moving_retry_interval_s <= 10.0))
@@ -1184,6 +1188,7 @@ void ReplanFsm::giveUpLocked(double t, const EsdfMap& map, GoalStatus status, Re
   rerouted_since_success_ = false;
   route_.clear();
   route_goals_.clear();
+  markRouteLocked(map);
   consecutive_failures_ = 0;
   failures_at_stall_ = 0;
   progress_.clear();
@@ -1205,6 +1210,112 @@ void ReplanFsm::giveUpLocked(double t, const EsdfMap& map, GoalStatus status, Re
   event.position = takeoverStateLocked(t).position;
   out->event = event;
   setState(FsmState::kWaitTarget, out, reason);
+}
+
+void ReplanFsm::markRouteLocked(const EsdfMap& map) {
+  route_samples_.clear();
+  route_sample_blocked_.clear();
+  route_sample_at_ = 0;
+  const double step = map.geometry().resolution();
+  for (size_t i = 1; i < route_.size(); ++i) {
+    const Eigen::Vector3d a = route_[i - 1], b = route_[i];
+    const int n = std::max(1, int(std::ceil((b - a).norm() / step)));
+    for (int k = i == 1 ? 0 : 1; k <= n; ++k) route_samples_.push_back(a + (b - a) * (double(k) / n));
+  }
+  route_sample_blocked_.reserve(route_samples_.size());
+  for (const Eigen::Vector3d& p : route_samples_) {
+    const DistanceQuery q = map.query(p);
+    const bool known = q.status == QueryStatus::kOk || q.status == QueryStatus::kUnknown;
+    route_sample_blocked_.push_back(known && q.distance < config_.safety_clearance_m);
+  }
+}
+
+namespace {
+// The route check looks for a way past an obstacle on the route this far across it (the local
+// search's reach: its sampling box extends 3.5 m to each side of the local segment) [m].
+constexpr double kRouteBypassM = 3.0;
+}  // namespace
+
+bool ReplanFsm::routeBlockedLocked(double t, const EsdfMap& map, FsmOutput* out) {
+  if (!config_.global_route || !(config_.route_check_length_m > 0.0) || route_samples_.empty() || goals_.empty() ||
+      route_goals_ != remainingGoalsLocked() || t - route_checked_s_ < config_.route_check_interval_s)
+    return false;
+  route_checked_s_ = t;
+  // Where along the route the vehicle is: the nearest sample within 20 m on from the last one found
+  // (a route that doubles back around a wall is not short-cut to its later part).
+  const double step = map.geometry().resolution();
+  const Eigen::Vector3d here = takeoverStateLocked(t).position;
+  const size_t window = size_t(20.0 / step);
+  size_t at = route_sample_at_;
+  double best = INFINITY;
+  for (size_t i = route_sample_at_; i < route_samples_.size() && i <= route_sample_at_ + window; ++i) {
+    const double d = (route_samples_[i] - here).squaredNorm();
+    if (d < best) best = d, at = i;
+  }
+  route_sample_at_ = at;
+  auto blockedAt = [&](const Eigen::Vector3d& p, double* distance) {
+    const DistanceQuery q = map.query(p);
+    *distance = q.distance;
+    return (q.status == QueryStatus::kOk || q.status == QueryStatus::kUnknown) && q.distance < config_.safety_clearance_m;
+  };
+  // A way past the obstacle within the local search's reach: a point of the obstacle's face (the
+  // plane through the blocked sample across the distance field's gradient in front of it, i.e. along
+  // a wall however the route crosses it), within kRouteBypassM of the sample, inside the height band
+  // and the map, and at the route's clearance from every known obstacle: beside a tree or a pillar,
+  // or in a window near the route, all the local planner's. None: a wall across the way, which the
+  // route must pass through an opening farther aside (or around its unseen part).
+  const double band_lo = std::max(config_.route.min_z_m, map.geometry().windowMin().z() + step);
+  const double band_hi = std::min(config_.route.max_z_m, map.geometry().windowMax().z() - step);
+  auto bypassed = [&](size_t i) {
+    const Eigen::Vector3d p = route_samples_[i];
+    Eigen::Vector3d normal = i > 0 ? map.query(route_samples_[i - 1]).gradient : Eigen::Vector3d::Zero();
+    if (!(normal.norm() > 0.1)) normal = route_samples_[std::min(i + 1, route_samples_.size() - 1)] - route_samples_[i > 0 ? i - 1 : 0];
+    if (!(normal.norm() > 1e-6)) normal = Eigen::Vector3d::UnitX();
+    normal.normalize();
+    // Across the face: horizontal along it, and up it (vertical for a vertical face).
+    Eigen::Vector3d along = normal.cross(Eigen::Vector3d::UnitZ());
+    along = along.norm() > 0.1 ? along.normalized() : Eigen::Vector3d::UnitX();
+    const Eigen::Vector3d up = along.cross(normal).normalized();
+    const int n = int(std::round(kRouteBypassM / step));
+    for (int a = -n; a <= n; ++a)
+      for (int b = -n; b <= n; ++b) {
+        const Eigen::Vector3d q = p + along * (a * step) + up * (b * step);
+        if (q.z() < band_lo || q.z() > band_hi) continue;
+        const DistanceQuery d = map.query(q);
+        if ((d.status == QueryStatus::kOk || d.status == QueryStatus::kUnknown) && d.distance >= config_.route.clearance_m)
+          return true;
+      }
+    return false;
+  };
+  // From 1 m ahead of the vehicle (the local planner's), up to the check length.
+  const size_t first = at + size_t(1.0 / step), last = at + size_t(config_.route_check_length_m / step);
+  bool in_bypassed = false;  // within an obstacle found bypassable: its next samples need no new look
+  for (size_t i = first; i < route_samples_.size() && i <= last; ++i) {
+    double distance = 0.0;
+    if (route_sample_blocked_[i] || !blockedAt(route_samples_[i], &distance)) {
+      in_bypassed = false;  // (as close when it was searched: not news)
+      continue;
+    }
+    if (in_bypassed) continue;
+    if (bypassed(i)) {
+      in_bypassed = true;
+      continue;
+    }
+    char text[200];
+    std::snprintf(text, sizeof(text),
+                  "the route is blocked %.1f m ahead at (%.2f, %.2f, %.2f) (%.2f m from a known obstacle): re-routing",
+                  double(i - at) * step, route_samples_[i].x(), route_samples_[i].y(), route_samples_[i].z(),
+                  distance);
+    reroute_reason_ = text;
+    route_stale_ = true;
+    pending_goals_ = remainingGoalsLocked();
+    goals_pending_ = !pending_goals_.empty();
+    rerouting_ = goals_pending_;
+    if (!out->message.empty()) out->message += "; ";
+    out->message += text;
+    return true;
+  }
+  return false;
 }
 
 void ReplanFsm::routeLocked(double t, const EsdfMap& map, std::unique_lock<std::mutex>* lock, FsmOutput* out,
@@ -1267,6 +1378,7 @@ void ReplanFsm::routeLocked(double t, const EsdfMap& map, std::unique_lock<std::
   char text[240];
   if (status == SearchStatus::kSuccess) {
     route_ = std::move(route);
+    markRouteLocked(map);
     out->new_route = true;
     std::snprintf(text, sizeof(text), "global route: %.1f m through %zu points (%d expansions)%s", pathLength(route_),
                   route_.size(), expansions,
@@ -1294,6 +1406,7 @@ void ReplanFsm::routeLocked(double t, const EsdfMap& map, std::unique_lock<std::
     // No proof either way (budget, start or goal inside the route's end clearance, or unknown space
     // not free to the route): straight references.
     route_.clear();
+    markRouteLocked(map);
     out->new_route = true;
     std::snprintf(text, sizeof(text), "no global route (%s at goal %zu): references go straight through the goals",
                   toString(status), failed_leg);
@@ -1421,6 +1534,9 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
   }
   event.status = result.status;
   event.message = result.message;
+  const std::string reroute_reason = std::exchange(reroute_reason_, std::string());
+  if (trigger == FsmEvent::Trigger::kReroute && !reroute_reason.empty())
+    event.message = reroute_reason + (event.message.empty() ? "" : "; " + event.message);
   event.stats = result.stats;
   const bool superseded = (current_ ? current_->id : -1) != current_id;
   // The takeover delay adapts to the planning time: a late plan lengthens it (up to the maximum),
@@ -1689,6 +1805,9 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
                                 (current_->stops_before_unknown &&
                                  current_->brake_start_s - t <= takeover_delay_s_ + 0.5 * config_.replan_interval_s));
       const bool periodic = !current_->ends_at_goal && t - current_->start_time_s >= config_.replan_interval_s;
+      // The route ahead newly blocked in the map: re-routed at the next tick (a collision ahead or a
+      // time jump is planned for first).
+      if (!jumped && !collision_ahead_ && !current_->manoeuvre() && routeBlockedLocked(t, map, &out)) break;
       if (jumped) {
         plan(t, map, FsmEvent::Trigger::kTimeJump, &lock, &out, now);
       } else if (collision_ahead_) {

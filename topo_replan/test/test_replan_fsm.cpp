@@ -485,6 +485,79 @@ TEST(ReplanFsm, ReroutesThroughAWindowFarAside) {
   }
 }
 
+// The same hall, the wall seen 7 m before it: the route, searched through unknown space when the
+// mission started, runs through the wall. The route check re-routes at once, at the first check on
+// the grown map, through the window 9 m aside, before any local plan has failed at the wall and while
+// the vehicle is still metres from it; the new route passes the check, so the wall re-routes once.
+// Without the check the first re-route waits for the local plans to fail. The same with the wall at
+// 45 degrees to the route (its window 9 m aside along it): the way past is looked for along the
+// wall's face, not straight across the route, which would find the free air beside an oblique wall.
+TEST(ReplanFsm, ReroutesAsSoonAsTheMapShowsTheRouteBlocked) {
+  for (const bool oblique : {false, true}) {
+    auto hall = [oblique](bool with_wall) {
+      SyntheticScene scene(Eigen::Vector3d(24.0, 16.0, 3.0));
+      if (with_wall && !oblique)
+        scene.fill([](const Eigen::Vector3d& p) {
+          return p.x() >= 11.9 && p.x() <= 12.1 && !(std::abs(p.y() - 13.0) <= 0.6 && std::abs(p.z() - 1.5) <= 0.6);
+        });
+      if (with_wall && oblique)  // x + y = 16, through (12, 4); its window around (5.6, 10.4)
+        scene.fill([](const Eigen::Vector3d& p) {
+          const double across = (p.x() + p.y() - 16.0) / std::sqrt(2.0);
+          const double along = (p.y() - p.x() - 4.8) / std::sqrt(2.0);
+          return std::abs(across) <= 0.1 && !(std::abs(along) <= 0.6 && std::abs(p.z() - 1.5) <= 0.6);
+        });
+      return scene;
+    };
+    SyntheticScene before_scene = hall(false), after_scene = hall(true);
+    const EsdfMap& before = before_scene.finish();
+    const EsdfMap& after = after_scene.finish();
+    bool seen = false;  // once seen, the wall stays in the map
+    auto mapAt = [&](double, const Eigen::Vector3d& p) -> const EsdfMap& {
+      seen = seen || p.x() >= 5.0;
+      return seen ? after : before;
+    };
+    for (const double check_length : {12.0, 0.0}) {
+      SCOPED_TRACE(std::string(oblique ? "oblique wall, " : "wall across, ") + "route_check_length_m " +
+                   std::to_string(check_length));
+      seen = false;
+      ReplanFsm::Config config = testConfig();
+      config.route_check_length_m = check_length;
+      config.max_plan_failures = 10;
+      auto fsm = makeFsm(config);
+      const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, mapAt, 1200, after);
+      EXPECT_TRUE(log.goal_reached);
+      EXPECT_GT(log.min_clearance, config.safety_clearance_m);
+      expectContinuous(log.trajectories, config.max_start_velocity_step_mps + 1e-6);
+      int failed_before = 0, blocked = 0;
+      double first_reroute = NAN;
+      for (size_t i = 0; i < log.events.size(); ++i) {
+        const FsmEvent& e = log.events[i];
+        const bool says_blocked = e.message.find("the route is blocked") != std::string::npos;
+        blocked += says_blocked;
+        if (says_blocked) {
+          EXPECT_EQ(e.trigger, FsmEvent::Trigger::kReroute) << e.message;
+        }
+        if (e.trigger == FsmEvent::Trigger::kReroute && std::isnan(first_reroute)) first_reroute = log.event_times[i];
+        if (std::isnan(first_reroute) && e.status != ReplanStatus::kSuccess) ++failed_before;
+      }
+      ASSERT_FALSE(std::isnan(first_reroute));
+      const double x_at_reroute = log.flown[size_t(std::lround(first_reroute / 0.05))].x();
+      std::printf("%s, route check %.0f m: first re-route at %.2f s, x = %.2f m, after %d failed plans; %d for a "
+                  "blocked route; goal reached in %.1f s, %zu planning calls\n", oblique ? "oblique wall" : "wall across",
+                  check_length, first_reroute, x_at_reroute, failed_before, blocked, log.duration_s, log.events.size());
+      if (check_length > 0.0) {
+        EXPECT_EQ(failed_before, 0);
+        EXPECT_LT(x_at_reroute, 8.0);  // seen at 5 m: re-routed within a check interval, metres before the wall
+        EXPECT_GE(blocked, 1);
+        EXPECT_LE(blocked, 2);  // the new route is clear: no re-route at every check
+      } else {
+        EXPECT_EQ(blocked, 0);
+        EXPECT_GT(failed_before, 0);
+      }
+    }
+  }
+}
+
 // The vehicle flies into a slot 0.4 m wide that is revealed only once it is inside: a dead end,
 // and the wall across the hall has its only door 9 m aside. It brakes in the slot, where it cannot
 // start a plan (0.2 m from both walls, below the optimiser's clearance) and no way up the distance
@@ -1123,6 +1196,9 @@ TEST(ReplanFsm, CommitsOnlyToKnownFreeSpace) {
     cut += traj.stops_before_unknown;
   }
   EXPECT_GT(cut, 0);  // the camera's range mattered
+  // The pillar revealed on the route is passed by the local planner: the route check sees the way
+  // past it on its face and does not re-route.
+  for (const FsmEvent& e : log.events) EXPECT_EQ(e.message.find("the route is blocked"), std::string::npos) << e.message;
   const double mean_speed = 21.0 / log.duration_s;
   printf("known-space commitment: %zu trajectories, %d cut before unknown space, %.1f s, mean speed %.2f m/s\n",
          log.trajectories.size(), cut, log.duration_s, mean_speed);

@@ -35,7 +35,9 @@
 // which samples around the reference segment, looks along it. The route is recomputed when the
 // goals change, after a stop, and when plans keep failing: at once on kNoPath or kGoalInCollision
 // (the map shows the way blocked), and every reroute_after_failures failed plans; on a moving
-// vehicle the rebuilt reference starts from the state the next trajectory takes over at. The
+// vehicle the rebuilt reference starts from the state the next trajectory takes over at. Moving, the
+// route ahead is checked against the map (route_check_length_m): a wall newly seen across it, with
+// no way past on its face within the local search's reach, re-routes before the local plans fail. The
 // search runs in tick() with the mutex released (it may take tens of milliseconds).
 //
 // No silent give-up (with global_route). A mission is given up only when the route search proves
@@ -284,6 +286,15 @@ class ReplanFsm {
     bool global_route = true;           ///< false: straight references through the goals, old give-up rule
     GlobalRouter::Config route;         ///< the route search (its clearance: keep the guide search's)
     int reroute_after_failures = 3;     ///< re-route every this many consecutive failed plans
+    /// Moving, the route ahead is checked against the map every route_check_interval_s, up to this
+    /// far along it from the vehicle: a part of it that was clear when it was searched and now lies
+    /// within safety_clearance_m of a known obstacle, with no point at the route's clearance on the
+    /// obstacle's face within 3 m of it (a wall seen across the route; a tree, a pillar or a window
+    /// close by is the local planner's), re-routes at once, while the vehicle can still turn to a
+    /// known opening or to the wall's unseen part, rather than when the local plans fail at the
+    /// wall. 0: off [m].
+    double route_check_length_m = 12.0;
+    double route_check_interval_s = 0.5;  ///< [s]
     double backoff_length_m = 1.5;      ///< a back-off flies at least this far back along the flown path [m] ...
     double max_backoff_length_m = 3.0;  ///< ... and on until escape_clearance_m from obstacles, up to this [m]
     double backoff_speed_mps = 1.0;     ///< peak speed of a back-off (the flown path is known free) [m/s]
@@ -440,6 +451,11 @@ class ReplanFsm {
   /// *searched_until: the clock (now(), or t) when a search ended; untouched when none ran.
   void routeLocked(double t, const EsdfMap& map, std::unique_lock<std::mutex>* lock, FsmOutput* out,
                    const std::function<double()>& now, double* searched_until);
+  /// The route check (Config::route_check_length_m) of a moving vehicle: true when the map shows a
+  /// part of the route ahead newly blocked; the re-route is then pending (searched at the next tick).
+  bool routeBlockedLocked(double t, const EsdfMap& map, FsmOutput* out);
+  /// Samples the new route_ and marks those already blocked on the map it was searched on.
+  void markRouteLocked(const EsdfMap& map);
   /// The stall rule (Config::progress_timeout_s), once per tick before the state machine: true when
   /// it acted (re-route, stop, back-off or give-up) and the tick ends there.
   bool handleStallLocked(double t, const EsdfMap& map, FsmOutput* out);
@@ -501,6 +517,14 @@ class ReplanFsm {
   std::unique_ptr<GlobalRouter> start_router_;  // ... relaxed farther from the start: the proof of unreachability
   Path route_;                            // through route_goals_; empty: straight references
   std::vector<Eigen::Vector3d> route_goals_;
+  // The route sampled along its length (route check): the samples, whether each was already within
+  // the safety clearance of a known obstacle when the route was searched (never a reason to re-route),
+  // and the sample the vehicle was last found nearest to (the check looks on from there).
+  std::vector<Eigen::Vector3d> route_samples_;
+  std::vector<uint8_t> route_sample_blocked_;
+  size_t route_sample_at_ = 0;
+  double route_checked_s_ = -INFINITY;
+  std::string reroute_reason_;            // why the pending re-route: said in its planning call's event
   bool route_stale_ = true;
   bool rerouting_ = false;                // the pending goals are a re-route of the mission
   bool rerouted_since_success_ = false;   // an immediate re-route was done since the last published plan
