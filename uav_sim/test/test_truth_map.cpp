@@ -114,5 +114,32 @@ TEST(TruthMap, OutsideTheWindowAndBadInput) {
   EXPECT_FALSE(TruthMap::build({{0.0, 0.0, 0.0}, {5000.0, 5000.0, 100.0}}, c, &error));
 }
 
+// The simulator's collision count: a vehicle hovering at a surface, its clearance jittering around the
+// radius (as a lagging controller left it under TSan: 0.1498 m, then 0.1502 m, then 0.1499 m), is one
+// collision; backing off past the release margin and coming back is a second.
+TEST(ContactCounter, JitterAtTheSurfaceIsOneContact) {
+  ContactCounter c(0.15, 0.05);
+  EXPECT_FALSE(c.update(0.30));
+  EXPECT_FALSE(c.inContact());
+  EXPECT_TRUE(c.update(0.1498));
+  int new_contacts = 0;
+  for (int i = 0; i < 100; ++i) new_contacts += c.update(i % 2 ? 0.1499 : 0.1502);
+  EXPECT_EQ(new_contacts, 0);
+  EXPECT_FALSE(c.update(0.1999));  // not yet clear by the margin
+  EXPECT_FALSE(c.update(0.14));
+  EXPECT_TRUE(c.inContact());
+  EXPECT_FALSE(c.update(NAN));  // no position: no change
+  EXPECT_TRUE(c.inContact());
+  EXPECT_FALSE(c.update(0.21));  // clear by more than the margin: the contact ends
+  EXPECT_FALSE(c.inContact());
+  EXPECT_TRUE(c.update(0.10));  // and entering again is a new one
+  EXPECT_DOUBLE_EQ(c.exactWithin(), 0.20);
+
+  ContactCounter no_margin(0.15, 0.0);  // the old rule: every crossing counts
+  int crossings = 0;
+  for (int i = 0; i < 10; ++i) crossings += no_margin.update(i % 2 ? 0.1502 : 0.1498);
+  EXPECT_EQ(crossings, 5);
+}
+
 }  // namespace
 }  // namespace topo_planner

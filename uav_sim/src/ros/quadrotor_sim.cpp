@@ -85,6 +85,8 @@ bool QuadrotorSim::Config::validate(std::string* why) const {
     err << "max_command_age_s must be in (0, 10]; ";
   if (!(finitePositive(collision_radius_m) && collision_radius_m <= 10.0))
     err << "collision_radius_m must be in (0, 10]; ";
+  if (!(finiteNonNegative(collision_release_m) && collision_release_m <= 1.0))
+    err << "collision_release_m must be in [0, 1]; ";
   if (!std::isfinite(ground_z_m)) err << "ground_z_m must be finite; ";
   if (!finiteNonNegative(position_noise_m) || !finiteNonNegative(velocity_noise_mps) ||
       !finiteNonNegative(position_drift_m_per_sqrt_s))
@@ -152,6 +154,7 @@ bool readQuadrotorSimParams(const ros::NodeHandle& pnh, QuadrotorSim::Config* co
   else
     r.errors() << "failsafe must be hold or cut, not '" << failsafe << "'; ";
   r.read("collision_radius_m", c.collision_radius_m);
+  r.read("collision_release_m", c.collision_release_m);
   r.read("ground_z_m", c.ground_z_m);
   r.read("odom_noise/position_m", c.position_noise_m);
   r.read("odom_noise/velocity_mps", c.velocity_noise_mps);
@@ -192,6 +195,7 @@ QuadrotorSim::QuadrotorSim(const ros::NodeHandle& nh, const ros::NodeHandle& pnh
       config_(config),
       quad_(config.vehicle),
       failsafe_controller_(GeometricController::Config(), config.vehicle),
+      contact_(config.collision_radius_m, config.collision_release_m),
       noise_rng_(config.noise_seed) {}
 
 std::unique_ptr<QuadrotorSim> QuadrotorSim::create(const ros::NodeHandle& nh, const ros::NodeHandle& pnh,
@@ -489,10 +493,9 @@ void QuadrotorSim::checkCollision(const std::shared_ptr<const TruthMap>& map) {
   const Eigen::Vector3d p = quad_.state().position;
   const double r = config_.collision_radius_m;
   const double ground = p.z() - config_.ground_z_m;
-  const double obstacle = map ? map->obstacleDistance(p, r) : INFINITY;
+  const double obstacle = map ? map->obstacleDistance(p, contact_.exactWithin()) : INFINITY;
   const double clearance = std::min(ground, obstacle);
-  const bool contact = clearance < r;
-  if (contact && !in_contact_) {
+  if (contact_.update(clearance)) {
     uint32_t count;
     {
       std::lock_guard<std::mutex> lock(stats_mutex_);
@@ -510,7 +513,6 @@ void QuadrotorSim::checkCollision(const std::shared_ptr<const TruthMap>& map) {
     ROS_WARN("quadrotor_sim: collision %u with the %s at (%.2f %.2f %.2f), clearance %.4f m < radius %.2f m", count,
              ground <= obstacle ? "ground" : "map", p.x(), p.y(), p.z(), clearance, r);
   }
-  in_contact_ = contact;
 }
 
 void QuadrotorSim::applyFaults(double t0_s, double t1_s) {

@@ -12,6 +12,7 @@
 // Thread safety: immutable after build(); share it as std::shared_ptr<const TruthMap>.
 
 #include <Eigen/Core>
+#include <cmath>
 #include <memory>
 #include <string>
 #include <vector>
@@ -69,6 +70,30 @@ class TruthMap {
   std::shared_ptr<OccupancyMap> occupancy_;
   std::unique_ptr<EsdfMap> esdf_;
   size_t occupied_ = 0;
+};
+
+/// Counts a body's contacts with the world from its clearance, with hysteresis: a contact begins when
+/// the clearance falls below radius_m and ends only once it is back above radius_m + release_m. A body
+/// resting at a surface (its clearance jittering around the radius by the controller's sub-millimetre
+/// corrections) is one contact, not one per crossing; leaving by release_m and entering again is two.
+/// A NaN clearance (no position) changes nothing.
+class ContactCounter {
+ public:
+  ContactCounter(double radius_m, double release_m) : radius_m_(radius_m), release_m_(release_m) {}
+  /// True when this clearance begins a new contact.
+  bool update(double clearance_m) {
+    if (std::isnan(clearance_m)) return false;
+    if (!in_contact_) return in_contact_ = clearance_m < radius_m_;
+    if (clearance_m > radius_m_ + release_m_) in_contact_ = false;
+    return false;
+  }
+  bool inContact() const { return in_contact_; }
+  /// The distance within which the clearance must be exact to decide (TruthMap::obstacleDistance).
+  double exactWithin() const { return radius_m_ + release_m_; }
+
+ private:
+  double radius_m_, release_m_;
+  bool in_contact_ = false;
 };
 
 }  // namespace topo_planner

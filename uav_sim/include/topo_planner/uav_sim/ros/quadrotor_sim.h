@@ -96,8 +96,9 @@
 // Collisions. The body is a sphere of collision_radius_m. A contact is the sphere overlapping an
 // occupied voxel cube (exact: TruthMap::obstacleDistance, an ESDF lower bound as broad phase and
 // point-to-cube distances within the radius as narrow phase) or the ground plane (centre below
-// ground_z_m + radius), checked every step. Entering contact counts one collision (leaving and
-// re-entering counts again); each is published with the running count and logged (ROS_WARN). The
+// ground_z_m + radius), checked every step. Entering contact counts one collision; the contact ends
+// when the clearance is back above the radius by collision_release_m (ContactCounter: a vehicle resting
+// at a surface is one collision, leaving and re-entering counts again); each is published with the running count and logged (ROS_WARN). The
 // vehicle passes through obstacles, but not the ground: its centre stops at ground_z_m and a
 // downward velocity is cancelled (it lies there, in contact, until the rotors lift it).
 //
@@ -105,7 +106,8 @@
 //   /sim/start_m, /sim/goals_m, /sim/map_resolution_m   the scenario (uav_sim/ros/truth_map.h)
 //   start_yaw_rad 0, step_s 0.001, odom_rate_hz 200, publish_clock (/use_sim_time), clock_start_s 1,
 //   realtime_factor 1, max_lag_s 0.05, lockstep true, lockstep_timeout_s 0.05, command_timeout_s 0.1,
-//   max_command_age_s 0.025, failsafe hold|cut, collision_radius_m 0.15, ground_z_m 0, odom_noise/position_m 0,
+//   max_command_age_s 0.025, failsafe hold|cut, collision_radius_m 0.15,
+//   collision_release_m 0.05, ground_z_m 0, odom_noise/position_m 0,
 //   odom_noise/velocity_mps 0, odom_noise/seed 1, odom_delay_s 0, world_frame world, body_frame
 //   base_link, camera_frame camera_optical, camera_extrinsic/translation_m [0 0 0],
 //   camera_extrinsic/quaternion_xyzw [-0.5 0.5 -0.5 0.5], truth_map_margin_m 1.5, map_wait_s 30,
@@ -170,6 +172,7 @@ class QuadrotorSim {
     double max_command_age_s = 0.025;     ///< a command answering odometry older than this is stale [s]
     Failsafe failsafe = Failsafe::kHold;  ///< what the vehicle does then
     double collision_radius_m = 0.15;     ///< body sphere radius [m]
+    double collision_release_m = 0.05;    ///< a contact ends at a clearance of radius + this [m]
     double ground_z_m = 0.0;              ///< height of the ground plane [m]
     double position_noise_m = 0.0;        ///< odometry position noise sigma per axis [m]
     double velocity_noise_mps = 0.0;      ///< odometry velocity noise sigma per axis [m/s]
@@ -258,7 +261,7 @@ class QuadrotorSim {
   uint64_t step_ = 0;
   ros::Time anchor_stamp_;  // stamp of step anchor_step_
   uint64_t anchor_step_ = 0;
-  bool in_contact_ = false;
+  ContactCounter contact_;
   bool in_failsafe_ = false;
   TrackingReference failsafe_reference_;
   std::mt19937 noise_rng_;
