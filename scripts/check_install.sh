@@ -27,9 +27,11 @@ LOG=$WORK/install.log
 # Runs a command in a clean environment with only the install space sourced.
 in_install() {
   # A clean environment, but for the sanitizer runs' options (their log_path: a report of a node
-  # flown from the install space counts like any other).
+  # flown from the install space counts like any other) and scales (without the time-limit scale the
+  # simulator's lockstep waited 50 ms of wall time for the TSan controller, ran on, and the flight
+  # from the install space timed out, its planner fed odometry from 0.64 s ahead).
   local keep=() v
-  for v in ASAN_OPTIONS UBSAN_OPTIONS TSAN_OPTIONS LSAN_OPTIONS TOPO_PLANNER_BUDGET_SCALE; do
+  for v in ASAN_OPTIONS UBSAN_OPTIONS TSAN_OPTIONS LSAN_OPTIONS TOPO_PLANNER_BUDGET_SCALE TOPO_PLANNER_TIME_LIMIT_SCALE; do
     [ -n "${!v:-}" ] && keep+=("$v=${!v}")
   done
   env -i HOME="$HOME" PATH=/usr/local/bin:/usr/bin:/bin LANG=C.UTF-8 "${keep[@]}" bash -c "source '$PREFIX/setup.bash' && $1"
