@@ -285,7 +285,11 @@ TEST_F(Simulator, StaleRotorCommandsAreRefused) {
     std::lock_guard<std::mutex> lock(obs.mutex);
     return obs.sim_status.empty() ? diagnostic_msgs::DiagnosticStatus() : obs.sim_status.back();
   };
-  const double stale0 = std::max(0.0, statusValue(latest(), "stale_commands"));
+  // The count before: the first report comes status_period_s (wall) after the start, maybe after
+  // the cases before this one (a missing count, NaN, must not pass for zero).
+  double stale0 = NAN;
+  ASSERT_TRUE(waitFor([&] { return std::isfinite(stale0 = statusValue(latest(), "stale_commands")); }, 30.0))
+      << "no status report with stale_commands on /quadrotor_sim/status";
   const Eigen::Vector3d here = positionOf(latestOdom());
   topo_planner::RotorCommand stopped;  // all four rotors at 0 rad/s
   double max_deviation = 0.0;
