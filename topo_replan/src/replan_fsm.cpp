@@ -585,6 +585,11 @@ GoalStatus ReplanFsm::setGoals(const std::vector<Eigen::Vector3d>& goals) {
   if (!have_odom_) return last_goal_status_ = GoalStatus::kNoOdometry;
   std::string why;
   if (!have_clock_ || !inputsFreshLocked(last_clock_s_, &why)) return last_goal_status_ = GoalStatus::kInputsStale;
+  // Refused here, not at the next tick: a flood of such goals (any host can publish them) would
+  // otherwise replace valid goals not yet taken up, and clear the global route of the mission flown.
+  if (map_geometry_)
+    for (const Eigen::Vector3d& g : goals)
+      if (!map_geometry_->inWindow(g)) return last_goal_status_ = GoalStatus::kGoalOutOfMap;
   pending_goals_ = goals;
   goals_pending_ = true;
   new_mission_ = true;
@@ -1705,6 +1710,7 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
   std::unique_lock<std::mutex> lock(mutex_);
   FsmOutput out;
   if (!std::isfinite(t)) return out;
+  map_geometry_ = map.geometry();
   observeClockLocked(t, &out);
   // Here only, not in checkSafety(): the replanner and the routers are used by tick() alone,
   // outside the lock, so only tick() may replace them.

@@ -121,6 +121,7 @@
 #include <vector>
 
 #include "topo_planner/path_searching/global_router.h"
+#include "topo_planner/plan_env/grid_geometry.h"
 #include "topo_planner/topo_replan/mission_progress.h"
 #include "topo_planner/topo_replan/topo_replanner.h"
 
@@ -356,7 +357,9 @@ class ReplanFsm {
   bool setServerSetpoint(const ServerSetpoint& setpoint);
   /// A new mission (replaces the current one): the goals are checked against the map and the
   /// reference is built at the next tick(); the status of that check is returned by tick() in
-  /// FsmOutput::message and kept in lastGoalStatus(). Immediate refusal for no odometry or bad input.
+  /// FsmOutput::message and kept in lastGoalStatus(). Immediate refusal for no odometry, bad input
+  /// and goals outside the window of the map last ticked on (kGoalOutOfMap): such goals change
+  /// nothing, neither the mission flown nor goals given before and not yet taken up by a tick.
   GoalStatus setGoals(const std::vector<Eigen::Vector3d>& goals);
 
   /// The planning thread: runs the state machine once at time t on the map. `now`, when given,
@@ -490,6 +493,7 @@ class ReplanFsm {
   double depth_arrival_s_ = 0.0;
   bool have_clock_ = false;
   double last_clock_s_ = 0.0;
+  std::optional<GridGeometry> map_geometry_;  // the window of the map last ticked on (setGoals)
   double typical_step_s_ = 0.0;  // running mean of the clock's steps between calls [s]
   int time_jumps_ = 0;
   bool time_jumped_ = false;      // set by observeClockLocked, consumed by tick (replan)
