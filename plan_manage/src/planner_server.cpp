@@ -197,7 +197,10 @@ void PlannerServer::waypointsCallback(const nav_msgs::PathConstPtr& msg) {
 }
 
 void PlannerServer::submitGoals(const std::vector<Eigen::Vector3d>& goals, const char* source) {
-  const GoalStatus status = fsm_->setGoals(goals);
+  // Checked against the map at once (the tick's lock order: the map's, then the FSM's): goals in
+  // an obstacle or outside the map change nothing.
+  GoalStatus status = GoalStatus::kInvalidInput;
+  mapping_->readMaps([&](const OccupancyMap&, const EsdfMap& esdf) { status = fsm_->setGoals(goals, esdf); });
   if (status != GoalStatus::kAccepted) {
     ROS_WARN_THROTTLE(1.0, "planner: %s refused: %s", source, toString(status));
     return;

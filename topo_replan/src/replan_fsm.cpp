@@ -579,6 +579,36 @@ Path ReplanFsm::route() const {
 
 GoalStatus ReplanFsm::setGoals(const std::vector<Eigen::Vector3d>& goals) {
   std::lock_guard<std::mutex> lock(mutex_);
+  return acceptGoalsLocked(goals);
+}
+
+GoalStatus ReplanFsm::setGoals(const std::vector<Eigen::Vector3d>& goals, const EsdfMap& map) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  bool finite = !goals.empty();
+  for (const Eigen::Vector3d& g : goals) finite = finite && g.allFinite();
+  std::string why;
+  const GoalStatus on_map = finite ? checkGoalsLocked(goals, map, &why) : GoalStatus::kAccepted;
+  if (on_map != GoalStatus::kAccepted) return last_goal_status_ = on_map;
+  return acceptGoalsLocked(goals);
+}
+
+GoalStatus ReplanFsm::checkGoalsLocked(const std::vector<Eigen::Vector3d>& goals, const EsdfMap& map,
+                                       std::string* why) const {
+  for (size_t i = 0; i < goals.size(); ++i) {
+    const DistanceQuery q = map.query(goals[i]);
+    if (q.status == QueryStatus::kOutOfMap || q.status == QueryStatus::kInvalidInput) {
+      *why = "goal " + std::to_string(i) + " is outside the map";
+      return GoalStatus::kGoalOutOfMap;
+    }
+    if (q.distance < config_.goal_clearance_m) {
+      *why = "goal " + std::to_string(i) + " is " + std::to_string(q.distance) + " m from an obstacle";
+      return GoalStatus::kGoalInObstacle;
+    }
+  }
+  return GoalStatus::kAccepted;
+}
+
+GoalStatus ReplanFsm::acceptGoalsLocked(const std::vector<Eigen::Vector3d>& goals) {
   if (goals.empty()) return last_goal_status_ = GoalStatus::kInvalidInput;
   for (const Eigen::Vector3d& g : goals)
     if (!g.allFinite()) return last_goal_status_ = GoalStatus::kInvalidInput;
@@ -1341,6 +1371,11 @@ void ReplanFsm::routeLocked(double t, const EsdfMap& map, std::unique_lock<std::
   if (goals.empty() || (!route_stale_ && goals == route_goals_)) return;
   for (const Eigen::Vector3d& g : goals)
     if (!g.allFinite()) return;  // refused by startGoalsLocked
+  // New goals this tick's startGoalsLocked will refuse: no search, and the route of the mission
+  // flown stays (one searched for them replaced it, or cleared it when the goal's clearance
+  // failed the search, and the mission went on without).
+  std::string refused;
+  if (goals_pending_ && !rerouting_ && checkGoalsLocked(goals, map, &refused) != GoalStatus::kAccepted) return;
   const Eigen::Vector3d start = takeoverStateLocked(t + takeover_delay_s_).position;
   const uint64_t epoch = route_epoch_;
   const bool rerouting = rerouting_;
@@ -1432,14 +1467,9 @@ bool ReplanFsm::startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out) {
     return false;
   };
   if (goals.empty()) return refuse(GoalStatus::kInvalidInput, "no goals");
-  for (size_t i = 0; i < goals.size(); ++i) {
-    const DistanceQuery q = map.query(goals[i]);
-    if (q.status == QueryStatus::kOutOfMap || q.status == QueryStatus::kInvalidInput)
-      return refuse(GoalStatus::kGoalOutOfMap, "goal " + std::to_string(i) + " is outside the map");
-    if (q.distance < config_.goal_clearance_m)
-      return refuse(GoalStatus::kGoalInObstacle, "goal " + std::to_string(i) + " is " + std::to_string(q.distance) +
-                                                     " m from an obstacle");
-  }
+  std::string why;
+  const GoalStatus on_map = checkGoalsLocked(goals, map, &why);
+  if (on_map != GoalStatus::kAccepted) return refuse(on_map, why);
   // The reference starts from the state at which the first trajectory on it will take over.
   FlatState start = takeoverStateLocked(t + takeover_delay_s_);
   if (state_ == FsmState::kInit || state_ == FsmState::kWaitTarget || !known_anchor_) known_anchor_ = start.position;

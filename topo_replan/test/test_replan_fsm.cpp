@@ -84,6 +84,8 @@ struct Faults {
   double odom_jump_at = INFINITY;                     // odometry off by odom_jump until the FSM re-anchors
   Eigen::Vector3d odom_jump = Eigen::Vector3d::Zero();
   double bad_goals_at = INFINITY;                     // then, once, goals outside the map are given
+  double obstacle_goal_at = INFINITY;                 // then, once, a goal inside an obstacle is given
+  Eigen::Vector3d obstacle_goal = Eigen::Vector3d::Zero();
 };
 
 struct FlightLog {
@@ -147,7 +149,19 @@ FlightLog fly(ReplanFsm* fsm, const Eigen::Vector3d& start, const std::vector<Ei
     log.min_clearance = std::min(log.min_clearance, truth.query(vehicle.position).distance);
     log.duration_s = t_true;
     const EsdfMap& map = mapAt(t, vehicle.position);
+    // A goal inside an obstacle: refused at once when given with the map (the planner node's way);
+    // given without, the tick refuses it, and neither way the mission's route changes.
+    std::optional<Path> route_before;
+    if (t_true >= faults.obstacle_goal_at && t_true < faults.obstacle_goal_at + 0.5 * dt) {
+      route_before = fsm->route();
+      EXPECT_FALSE(route_before->empty());
+      EXPECT_EQ(fsm->setGoals({faults.obstacle_goal}, map), GoalStatus::kGoalInObstacle);
+      EXPECT_EQ(fsm->setGoals({faults.obstacle_goal}), GoalStatus::kAccepted);
+    }
     for (FsmOutput out : {fsm->checkSafety(t, map), fsm->tick(t, map)}) {
+      if (route_before && !out.message.empty()) {
+        EXPECT_NE(out.message.find("goal refused: kGoalInObstacle"), std::string::npos) << out.message;
+      }
       if (out.event) log.events.push_back(*out.event), log.event_times.push_back(t);
       if (getenv("FSM_DEBUG") && (out.event || !out.message.empty()))
         printf("x=%.2f v=%.2f t=%.2f %s | %s %s %s %s jump=%.3f\n", vehicle.position.x(), vehicle.velocity.norm(), t, out.message.c_str(), out.event ? toString(out.event->trigger) : "",
@@ -168,6 +182,10 @@ FlightLog fly(ReplanFsm* fsm, const Eigen::Vector3d& start, const std::vector<Ei
         if (jumped && out.trajectory->braking) odom_offset.setZero();
       }
       log.goal_reached = log.goal_reached || out.goal_reached;
+    }
+    if (route_before) {
+      EXPECT_EQ(fsm->lastGoalStatus(), GoalStatus::kGoalInObstacle);
+      EXPECT_TRUE(fsm->route() == *route_before) << "the route of the mission flown changed";
     }
   }
   return log;
@@ -246,9 +264,33 @@ TEST(ReplanFsm, RefusesInvalidGoals) {
   EXPECT_EQ(fsm->setGoals({{18.0, 4.0, 1.5}}), GoalStatus::kAccepted);
   EXPECT_EQ(fsm->setGoals({{1e6, 0.0, 1.0}}), GoalStatus::kGoalOutOfMap);
   EXPECT_EQ(fsm->setGoals({{5.0, 4.0, 1.5}, {5.0, 4.0, -1e3}}), GoalStatus::kGoalOutOfMap);
+  // The same with goals inside the pillar, checked against the map when given.
+  EXPECT_EQ(fsm->setGoals({{18.0, 4.0, 1.5}}), GoalStatus::kAccepted);
+  EXPECT_EQ(fsm->setGoals({{10.0, 4.0, 1.5}}, map), GoalStatus::kGoalInObstacle);
+  EXPECT_EQ(fsm->setGoals({{10.0, 4.2, 1.5}, {40.0, 4.0, 1.5}}, map), GoalStatus::kGoalInObstacle);
+  EXPECT_EQ(fsm->setGoals({{5.0, 4.0, 1.5}, {40.0, 4.0, 1.5}}, map), GoalStatus::kGoalOutOfMap);
+  EXPECT_EQ(fsm->setGoals({{5.0, 4.0, NAN}}, map), GoalStatus::kInvalidInput);
   out = fsm->tick(0.15, map);
   EXPECT_TRUE(out.trajectory) << out.message;
   EXPECT_EQ(fsm->state(), FsmState::kExecTraj) << out.message;
+  EXPECT_EQ(fsm->remainingGoals(), std::vector<Eigen::Vector3d>{Eigen::Vector3d(18.0, 4.0, 1.5)});
+}
+
+// A goal inside an obstacle given while a routed mission flies (hostile_traffic publishes such
+// goals): the mission and its global route go on unchanged, and the goal is reached.
+TEST(ReplanFsm, GoalsInAnObstacleLeaveTheMissionAndItsRoute) {
+  Corridor c;
+  c.scene.pillar(12.0, 4.0, 0.6);
+  const EsdfMap& map = c.scene.finish();
+  auto fsm = makeFsm();
+  Faults faults;
+  faults.obstacle_goal_at = 2.0;
+  faults.obstacle_goal = Eigen::Vector3d(12.0, 4.0, 1.5);
+  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, always(map), 600, map, faults);
+  EXPECT_TRUE(log.goal_reached);
+  for (const FsmEvent& e : log.events) EXPECT_NE(e.fallback, "give_up") << e.message;
+  EXPECT_GT(log.min_clearance, testConfig().safety_clearance_m);
+  expectContinuous(log.trajectories);
 }
 
 TEST(ReplanFsm, FliesAroundAPillarToTheGoal) {

@@ -361,6 +361,12 @@ class ReplanFsm {
   /// and goals outside the window of the map last ticked on (kGoalOutOfMap): such goals change
   /// nothing, neither the mission flown nor goals given before and not yet taken up by a tick.
   GoalStatus setGoals(const std::vector<Eigen::Vector3d>& goals);
+  /// The same, with each goal also checked at once against `map` (the planner node's, under its
+  /// read lock): outside it kGoalOutOfMap, closer than goal_clearance_m to an obstacle
+  /// kGoalInObstacle. Such goals change nothing either (a flood of goals inside obstacles replaced
+  /// valid goals not yet taken up, and the route searched for each cleared the mission's route).
+  /// The next tick checks accepted goals again, on the map it plans on.
+  GoalStatus setGoals(const std::vector<Eigen::Vector3d>& goals, const EsdfMap& map);
 
   /// The planning thread: runs the state machine once at time t on the map. `now`, when given,
   /// is the clock: a plan that finishes after its takeover time (t + takeover_delay_s) is
@@ -397,6 +403,10 @@ class ReplanFsm {
   void setState(FsmState s, FsmOutput* out, const std::string& why);
   void applyPendingConfigLocked(FsmOutput* out);
   bool startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out);
+  /// Goals against the map: kAccepted, or kGoalOutOfMap / kGoalInObstacle with why (goal index).
+  GoalStatus checkGoalsLocked(const std::vector<Eigen::Vector3d>& goals, const EsdfMap& map, std::string* why) const;
+  /// setGoals() once the goals passed its checks.
+  GoalStatus acceptGoalsLocked(const std::vector<Eigen::Vector3d>& goals);
   /// The commanded state at t_takeover: on the current trajectory, or on the one it replaced when
   /// t_takeover comes before the current one's start.
   FlatState takeoverStateLocked(double t_takeover) const;
