@@ -671,8 +671,11 @@ void QuadrotorSim::waitForPerception(const ros::Time& clock) {
       {config_.perception_max_lag_s, &Stats::perception_waits, &Stats::perception_timeouts, "depth frame fused"},
       {config_.planner_max_lag_s, &Stats::planner_waits, &Stats::planner_timeouts, "planning tick finished"},
       {config_.setpoint_max_lag_s, &Stats::setpoint_waits, &Stats::setpoint_timeouts, "setpoint"}};
-  for (const Source source : {kMapping, kPlanner, kSetpoints}) {
-    const Lockstep& ls = locksteps[source];
+  // By index, not over the enumerators: GCC 12 under ASan took an enumerator for any value of the
+  // enum's range, up to kNumSources, and warned of a subscript out of bounds.
+  for (int index = 0; index < kNumSources; ++index) {
+    const Source source = static_cast<Source>(index);
+    const Lockstep& ls = locksteps[index];
     std::unique_lock<std::mutex> lock(perception_mutex_);
     // Not before the first report, nor while the camera is blacked out (no frame will come).
     if (reported_[source].isZero() || suspended_[source] || (source == kMapping && depth_blackout_)) continue;
