@@ -20,6 +20,7 @@ PACKAGES=(
   python3-rosbag  # planner.launch record:=true, the record-and-replay check
   # algorithms and maps
   libeigen3-dev libnlopt-cxx-dev liboctomap-dev libdynamicedt3d-dev libpcl-dev libopencv-dev
+  libyaml-cpp-dev  # config/*.yaml read by the ROS-free closed loop (plan_manage/sim_flight.h)
   # headless demo and figures
   xvfb python3-matplotlib
 )

@@ -4,11 +4,13 @@
 #include <topo_planner/FlightResult.h>
 
 #include <Eigen/Geometry>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <sstream>
 
+#include "topo_planner/plan_manage/trajectory_conversions.h"
 #include "topo_planner/uav_sim/ros/conversions.h"
 #include "topo_planner/uav_sim/ros/param_reader.h"
 
@@ -66,6 +68,7 @@ bool FlightMonitor::Config::validate(std::string* why) const {
   std::string core;
   if (!recorder.validate(&core)) err << core << "; ";
   if (!truth.validate(&core)) err << "truth: " << core << "; ";
+  if (!oracle.validate(&core)) err << "oracle: " << core << "; ";
   if (!std::isfinite(ground_z_m)) err << "ground_z_m must be finite; ";
   if (!finitePositive(clearance_exact_within_m)) err << "clearance_exact_within_m must be positive; ";
   for (const Eigen::Vector3d& g : goals)
@@ -139,6 +142,18 @@ bool readFlightMonitorParams(const ros::NodeHandle& pnh, FlightMonitor::Config* 
   r.read("resend_period_s", c.resend_period_s);
   r.read("resend_settle_s", c.resend_settle_s);
   r.read("ground_truth_topic", c.ground_truth_topic);
+  // The speed account and the oracle: the flight's limits (simulation.launch passes max_vel_mps and
+  // max_acc_mps2) and the planner's guide clearance and height band.
+  r.read("max_vel_mps", rc.speed.max_vel_mps);
+  r.read("max_acc_mps2", rc.speed.max_acc_mps2);
+  r.read("speed_account/fast_fraction", rc.speed.fast_fraction);
+  r.read("speed_account/limit_fraction", rc.speed.limit_fraction);
+  c.oracle.max_vel_mps = rc.speed.max_vel_mps;
+  c.oracle.max_acc_mps2 = rc.speed.max_acc_mps2;
+  c.oracle.pass_through = rc.pass_through;
+  r.read("oracle/clearance_m", c.oracle.clearance_m);
+  r.read("oracle/min_z_m", c.oracle.min_z_m);
+  r.read("oracle/max_z_m", c.oracle.max_z_m);
   r.read("setpoint_jump_margin_m", rc.setpoints.jump_margin_m);
   r.read("reanchor_tolerance_m", rc.setpoints.reanchor_tolerance_m);
   r.read("reanchor_window_s", rc.setpoints.reanchor_window_s);
@@ -211,6 +226,8 @@ std::unique_ptr<FlightMonitor> FlightMonitor::create(const ros::NodeHandle& nh, 
   m->collision_sub_ = m->nh_.subscribe("quadrotor/collision", 50, &FlightMonitor::collisionCallback, self);
   m->replan_sub_ = m->nh_.subscribe("planning/replan_event", 100, &FlightMonitor::replanCallback, self);
   m->reference_sub_ = m->nh_.subscribe("planning/reference_path", 10, &FlightMonitor::referenceCallback, self);
+  m->bspline_sub_ = m->nh_.subscribe("planning/bspline", 20, &FlightMonitor::bsplineCallback, self,
+                                     ros::TransportHints().tcpNoDelay());
   if (!config.ground_truth_topic.empty())
     m->truth_state_sub_ = m->nh_.subscribe(config.ground_truth_topic, 400, &FlightMonitor::truthCallback, self,
                                            ros::TransportHints().tcpNoDelay());
@@ -301,6 +318,8 @@ void FlightMonitor::truthCallback(const nav_msgs::OdometryConstPtr& msg) {
   }
   const double t = last_stream_t_s_ = clock_.addStreamStamp(msg->header.stamp.toSec());
   have_stream_time_ = true;
+  have_truth_position_ = true;
+  truth_position_ = state.position;
   if (!recorder_.started() || done_ || !truth_) return;
   OdometrySample s;
   s.t_s = t;
@@ -310,9 +329,36 @@ void FlightMonitor::truthCallback(const nav_msgs::OdometryConstPtr& msg) {
   recorder_.addTruth(s);
 }
 
+void FlightMonitor::bsplineCallback(const topo_planner::BsplineConstPtr& msg) {
+  ReceivedTrajectory received;
+  std::string why;
+  if (!fromMsg(*msg, &received, &why)) {
+    ROS_WARN_THROTTLE(5.0, "flight_monitor: trajectory ignored: %s", why.c_str());
+    return;
+  }
+  SpeedAccount::Trajectory t;
+  t.session = received.planner_session;
+  t.id = received.id;
+  t.start_s = timeOf(msg->start_time);
+  t.brake_start_s = t.start_s + (received.brake_start_s - received.start_time_s);
+  t.kind = received.kind == Bspline::KIND_BRAKING     ? SpeedAccount::TrajectoryKind::kBraking
+           : received.kind == Bspline::KIND_MANOEUVRE ? SpeedAccount::TrajectoryKind::kManoeuvre
+                                                      : SpeedAccount::TrajectoryKind::kPlan;
+  t.spline = received.spline;
+  recorder_.addTrajectory(t);
+}
+
 void FlightMonitor::setpointCallback(const topo_planner::PositionCommandConstPtr& msg) {
   SetpointSample s;
   s.t_s = timeOf(msg->header.stamp);
+  switch (msg->mode) {
+    case PositionCommand::MODE_TRAJECTORY: s.mode = SpeedAccount::Mode::kTrajectory; break;
+    case PositionCommand::MODE_END_STOP:
+    case PositionCommand::MODE_WATCHDOG_STOP: s.mode = SpeedAccount::Mode::kStopping; break;
+    default: s.mode = SpeedAccount::Mode::kHold; break;
+  }
+  s.planner_session = msg->planner_session;
+  s.trajectory_id = msg->trajectory_id;
   s.position_m = Eigen::Vector3d(msg->position.x, msg->position.y, msg->position.z);
   s.velocity_mps = Eigen::Vector3d(msg->velocity.x, msg->velocity.y, msg->velocity.z);
   s.acceleration_mps2 = Eigen::Vector3d(msg->acceleration.x, msg->acceleration.y, msg->acceleration.z);
@@ -419,6 +465,7 @@ void FlightMonitor::checkTimer(const ros::TimerEvent&) {
     if (now - ready_since_s_ < config_.start_delay_s) return;
     startup_timer_.stop();
     ROS_INFO("flight_monitor: true map, odometry and planner ready: starting the flight");
+    computeOracle();
     handle(recorder_.start(now), now);
     return;
   }
@@ -451,6 +498,22 @@ void FlightMonitor::startupTimeout(const ros::SteadyTimerEvent&) {
 
 // ---------------------------------------------------------------------------------------------
 // Flight
+
+void FlightMonitor::computeOracle() {
+  // From where the vehicle is (the true state; the scenario's start without one).
+  const Eigen::Vector3d start = have_truth_position_ ? truth_position_ : config_.start_m;
+  if (!truth_ || !start.allFinite()) return;
+  const auto t0 = std::chrono::steady_clock::now();
+  const FlightOracle::Result oracle = FlightOracle::compute(truth_->esdf(), start, config_.goals, config_.oracle);
+  const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  if (!oracle.ok) {
+    ROS_WARN("flight_monitor: no oracle time for this flight: %s", oracle.why.c_str());
+    return;
+  }
+  recorder_.setOracle(oracle);
+  ROS_INFO("flight_monitor: oracle: %.1f s for the %zu goals at %.1f m/s and %.1f m/s^2 (%.0f ms)", oracle.total_s,
+           config_.goals.size(), config_.oracle.max_vel_mps, config_.oracle.max_acc_mps2, ms);
+}
 
 std::string FlightMonitor::notReadyReason() const {
   std::string why;

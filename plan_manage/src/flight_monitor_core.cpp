@@ -274,11 +274,12 @@ bool FlightRecorder::Config::validate(std::string* why) const {
   if (!finitePositive(max_sample_gap_s)) err << "max_sample_gap_s must be positive; ";
   std::string sub;
   if (!setpoints.validate(&sub)) err << sub << "; ";
+  if (!speed.validate(&sub)) err << "speed account: " << sub << "; ";
   return finishWhy(err, why).empty();
 }
 
 FlightRecorder::FlightRecorder(const Config& config, const std::vector<Eigen::Vector3d>& goals)
-    : config_(config), setpoint_watch_(config.setpoints) {
+    : config_(config), speed_account_(config.speed), setpoint_watch_(config.setpoints) {
   assert(config.validate(nullptr));
   goals_.resize(goals.size());
   for (size_t i = 0; i < goals.size(); ++i) {
@@ -314,7 +315,8 @@ FlightRecorder::Update FlightRecorder::addOdometry(const OdometrySample& s) {
   const double speed = s.velocity_mps.norm();
   setpoint_watch_.setMeasuredPosition(s.position_m);
 
-  if (have_previous_) {
+  // Speed and path from the odometry only without a ground truth (its noise is no motion).
+  if (have_previous_ && !truth_seen_) {
     const double dt = s.t_s - previous_.t_s;
     if (dt > 0.0 && dt <= config_.max_sample_gap_s) {
       speed_integral_m_ += 0.5 * (previous_.velocity_mps.norm() + speed) * dt;
@@ -324,8 +326,11 @@ FlightRecorder::Update FlightRecorder::addOdometry(const OdometrySample& s) {
       goal.path_length_m += step;
     }
   }
-  max_speed_mps_ = std::max(max_speed_mps_, speed);
-  goal.max_speed_mps = std::max(goal.max_speed_mps, speed);
+  if (!truth_seen_) {
+    max_speed_mps_ = std::max(max_speed_mps_, speed);
+    goal.max_speed_mps = std::max(goal.max_speed_mps, speed);
+    speed_account_.addSpeed(s.t_s, speed);
+  }
 
   if (std::isfinite(s.clearance_m)) addClearance(s.position_m, s.clearance_m, &goal);
 
@@ -382,13 +387,49 @@ void FlightRecorder::addTruth(const OdometrySample& truth) {
   if (!flying() || !std::isfinite(truth.t_s) || !truth.position_m.allFinite() || !truth.velocity_mps.allFinite())
     return;
   truth_speed_mps_ = truth.velocity_mps.norm();
+  GoalRecord& goal = goals_[size_t(active_)];
+  if (!truth_seen_) {  // from now on speed and path come from here
+    truth_seen_ = true;
+    speed_integral_m_ = integrated_s_ = path_length_m_ = max_speed_mps_ = 0.0;
+    for (GoalRecord& g : goals_) g.path_length_m = g.max_speed_mps = 0.0;
+  }
+  if (have_previous_truth_ && truth.t_s > previous_truth_.t_s) {
+    const double dt = truth.t_s - previous_truth_.t_s;
+    if (dt <= config_.max_sample_gap_s) {
+      speed_integral_m_ += 0.5 * (previous_truth_.velocity_mps.norm() + truth_speed_mps_) * dt;
+      integrated_s_ += dt;
+      const double step = (truth.position_m - previous_truth_.position_m).norm();
+      path_length_m_ += step;
+      goal.path_length_m += step;
+    }
+  }
+  if (!have_previous_truth_ || truth.t_s >= previous_truth_.t_s) {
+    previous_truth_ = truth;
+    have_previous_truth_ = true;
+  }
+  max_speed_mps_ = std::max(max_speed_mps_, truth_speed_mps_);
+  goal.max_speed_mps = std::max(goal.max_speed_mps, truth_speed_mps_);
+  speed_account_.addSpeed(truth.t_s, truth_speed_mps_);
   if (!std::isfinite(truth.clearance_m)) return;
   truth_clearance_m_ = truth.clearance_m;
-  addClearance(truth.position_m, truth.clearance_m, &goals_[size_t(active_)]);
+  addClearance(truth.position_m, truth.clearance_m, &goal);
 }
 
 void FlightRecorder::addSetpoint(const SetpointSample& setpoint) {
-  if (flying()) setpoint_watch_.addSetpoint(setpoint);
+  if (!flying()) return;
+  setpoint_watch_.addSetpoint(setpoint);
+  SpeedAccount::Setpoint sp;
+  sp.mode = setpoint.mode;
+  sp.session = setpoint.planner_session;
+  sp.trajectory_id = setpoint.trajectory_id;
+  sp.velocity = setpoint.velocity_mps;
+  sp.acceleration = setpoint.acceleration_mps2;
+  speed_account_.setSetpoint(sp);
+}
+
+void FlightRecorder::setOracle(const FlightOracle::Result& oracle) {
+  if (!oracle.ok || oracle.time_s.size() != goals_.size()) return;
+  for (size_t i = 0; i < goals_.size(); ++i) goals_[i].oracle_time_s = oracle.time_s[i];
 }
 
 void FlightRecorder::addOdometryJump(double t_s, const Eigen::Vector3d& delta_m) {
@@ -525,6 +566,23 @@ FlightSummary FlightRecorder::summary() const {
   s.replan_ms_max = percentile(ms, 1.0);
   if (started_) s.duration_s = (finished() ? end_t_s_ : last_t_s_) - start_t_s_;
   s.path_length_m = path_length_m_;
+  s.measured_on_truth = truth_seen_;
+  s.speed = speed_account_.totals();
+  s.fast_share = s.speed.total_s > 0.0 ? s.speed.fast_s / s.speed.total_s : 0.0;
+  double oracle = 0.0, flown = 0.0;
+  bool any = false, all_known = true;
+  for (const GoalRecord& g : goals_)
+    if (g.reached) {
+      any = true;
+      all_known = all_known && std::isfinite(g.oracle_time_s);
+      oracle += g.oracle_time_s;
+      flown += g.reached_t_s - g.sent_t_s;
+    }
+  if (any && all_known && oracle > 0.0) {
+    s.oracle_time_s = oracle;
+    s.reached_time_s = flown;
+    s.time_ratio = flown / oracle;
+  }
   const SetpointWatch::Stats& w = setpoint_watch_.stats();
   s.setpoints = w.setpoints;
   s.setpoint_jumps = w.jumps;
@@ -561,6 +619,28 @@ std::string formatGoalLine(const GoalRecord& goal, int goals_total, double fligh
   return l.str();
 }
 
+namespace {
+// "12.3 s for the goals reached, flown in 20.1 s: 1.63x" (or why there is none).
+std::string speedLine(const FlightSummary& s) {
+  if (!std::isfinite(s.time_ratio)) return "n/a (no oracle, or no goal reached)";
+  return fmt(s.oracle_time_s, 1) + " s for the goals reached, flown in " + fmt(s.reached_time_s, 1) + " s: " +
+         fmt(s.time_ratio, 2) + "x";
+}
+}  // namespace
+
+std::string accountLine(const SpeedAccount::Totals& t) {
+  if (!(t.slow() > 0.0)) return "none";
+  std::ostringstream l;
+  bool first = true;
+  for (int c = 0; c < kNumSlowCauses; ++c) {
+    const double share = t.share(SlowCause(c));
+    if (share < 0.005) continue;
+    l << (first ? "" : ", ") << toString(SlowCause(c)) << " " << fmt(100.0 * share, 0) << "%";
+    first = false;
+  }
+  return l.str();
+}
+
 std::string formatReport(const FlightSummary& s, const std::string& name) {
   std::ostringstream r;
   r << "flight report" << (name.empty() ? "" : " (" + name + ")") << ": " << (s.success ? "SUCCESS" : "FAILURE")
@@ -579,7 +659,11 @@ std::string formatReport(const FlightSummary& s, const std::string& name) {
     << " stall re-routes\n"
     << "  replanning time      median " << fmt(s.replan_ms_median, 1) << " ms, p95 " << fmt(s.replan_ms_p95, 1)
     << " ms, max " << fmt(s.replan_ms_max, 1) << " ms\n"
-    << "  duration             " << fmt(s.duration_s, 1) << " s, path " << fmt(s.path_length_m, 1) << " m\n"
+    << "  duration             " << fmt(s.duration_s, 1) << " s, path " << fmt(s.path_length_m, 1) << " m"
+    << (s.measured_on_truth ? " (ground truth)" : " (odometry)") << "\n"
+    << "  oracle               " << speedLine(s) << "\n"
+    << "  speed account        " << fmt(100.0 * s.fast_share, 0) << "% of the time fast; slow: " << accountLine(s.speed)
+    << "\n"
     << "  setpoints            " << s.setpoints << ", " << s.setpoint_jumps << " jumps, " << s.reanchorings
     << " re-anchorings, worst deceleration " << fmt(s.max_decel_mps2, 2) << " m/s^2, worst acceleration "
     << fmt(s.max_acc_mps2, 2) << " m/s^2\n"
@@ -695,6 +779,15 @@ std::string reportJson(const FlightSummary& s, const std::vector<GoalRecord>& go
     << "  \"replan_ms_max\": " << jsonNumber(s.replan_ms_max) << ",\n"
     << "  \"duration_s\": " << jsonNumber(s.duration_s) << ",\n"
     << "  \"path_length_m\": " << jsonNumber(s.path_length_m) << ",\n"
+    << "  \"measured_on_truth\": " << (s.measured_on_truth ? "true" : "false") << ",\n"
+    << "  \"oracle_time_s\": " << jsonNumber(s.oracle_time_s) << ",\n"
+    << "  \"reached_time_s\": " << jsonNumber(s.reached_time_s) << ",\n"
+    << "  \"time_ratio\": " << jsonNumber(s.time_ratio) << ",\n"
+    << "  \"fast_share\": " << jsonNumber(s.fast_share) << ",\n"
+    << "  \"speed_account_s\": {\"total\": " << jsonNumber(s.speed.total_s) << ", \"fast\": " << jsonNumber(s.speed.fast_s);
+  for (int c = 0; c < kNumSlowCauses; ++c)
+    j << ", " << jsonString(toString(SlowCause(c))) << ": " << jsonNumber(s.speed.slow_s[size_t(c)]);
+  j << "},\n"
     << "  \"setpoints\": " << s.setpoints << ",\n"
     << "  \"setpoint_jumps\": " << s.setpoint_jumps << ",\n"
     << "  \"reanchorings\": " << s.reanchorings << ",\n"
@@ -724,6 +817,7 @@ std::string reportJson(const FlightSummary& s, const std::vector<GoalRecord>& go
       << ", \"sent_t_s\": " << jsonNumber(g.sent ? g.sent_t_s - start_t_s : std::nan(""))
       << ", \"reached_t_s\": " << jsonNumber(g.reached ? g.reached_t_s - start_t_s : std::nan(""))
       << ", \"time_s\": " << jsonNumber(g.reached ? g.reached_t_s - g.sent_t_s : std::nan(""))
+      << ", \"oracle_time_s\": " << jsonNumber(g.oracle_time_s)
       << ", \"path_length_m\": " << jsonNumber(g.path_length_m) << ", \"max_speed_mps\": " << jsonNumber(g.max_speed_mps)
       << ", \"min_clearance_m\": " << jsonNumber(g.min_clearance_m) << ", \"distance_m\": " << jsonNumber(g.distance_m)
       << ", \"replans\": " << g.replans << ", \"replan_failures\": " << g.replan_failures << ", \"stalls\": " << g.stalls

@@ -28,6 +28,8 @@ Bspline toMsg(const ExecTrajectory& trajectory, const std::string& frame_id, uin
     msg.heading_target.z = trajectory.heading_target.z();
   }
   msg.reanchor = trajectory.reanchor;
+  msg.kind = trajectory.braking ? Bspline::KIND_BRAKING : trajectory.escape ? Bspline::KIND_MANOEUVRE : Bspline::KIND_PLAN;
+  msg.brake_start = ros::Time(std::max(0.0, std::min(trajectory.brake_start_s, trajectory.endTime())));
   return msg;
 }
 
@@ -67,6 +69,8 @@ bool fromMsg(const Bspline& msg, ReceivedTrajectory* out, std::string* why) {
   out->spline = s;
   out->heading_target = heading_target;
   out->reanchor = msg.reanchor;
+  out->kind = msg.kind <= uint8_t(Bspline::KIND_MANOEUVRE) ? msg.kind : uint8_t(Bspline::KIND_PLAN);
+  out->brake_start_s = std::max(out->start_time_s, msg.brake_start.toSec());
   return true;
 }
 

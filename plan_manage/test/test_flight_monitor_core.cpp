@@ -167,6 +167,71 @@ TEST(FlightRecorder, PathLengthAndSpeedsMatchClosedForm) {
   EXPECT_EQ(s.message, "in progress");
 }
 
+// Under odometry noise the path and speeds come from the ground truth: a noisy estimate that zigzags
+// 5 cm at 200 Hz around a straight 1 m/s flight doubled-and-more its length (757 m reported for about
+// 127 m flown in a realistic-sensing flight).
+TEST(FlightRecorder, PathAndSpeedsAreMeasuredOnTheGroundTruth) {
+  FlightRecorder::Config c;
+  c.speed.max_vel_mps = 2.0;
+  FlightRecorder rec(c, {Eigen::Vector3d(100, 0, 1)});
+  rec.start(0.0);
+  std::mt19937 rng(3);
+  std::normal_distribution<double> noise(0.0, 0.05);
+  for (int i = 0; i <= 2000; ++i) {  // 10 s at 1 m/s
+    const double t = i * kDt;
+    const Eigen::Vector3d p(t, 0, 1), v(1, 0, 0);
+    rec.addOdometry(sample(t, p + Eigen::Vector3d(noise(rng), noise(rng), 0), v + Eigen::Vector3d(noise(rng), 0, 0)));
+    rec.addTruth(sample(t, p, v));
+  }
+  const FlightSummary s = rec.summary();
+  EXPECT_TRUE(s.measured_on_truth);
+  EXPECT_NEAR(s.path_length_m, 10.0, 1e-9);
+  EXPECT_NEAR(rec.goals()[0].path_length_m, 10.0, 1e-9);
+  EXPECT_NEAR(s.mean_speed_mps, 1.0, 1e-9);
+  EXPECT_NEAR(s.max_speed_mps, 1.0, 1e-9);
+  // The speed account counted the true speed: slow all along (1 m/s < 0.8 x 2 m/s), held (no setpoint).
+  EXPECT_NEAR(s.speed.total_s, 10.0, 1e-9);
+  EXPECT_NEAR(s.speed.slow_s[size_t(SlowCause::kHeld)], 10.0, 1e-9);
+  EXPECT_EQ(s.fast_share, 0.0);
+  // The odometry alone (no ground truth) would have measured the noise too.
+  FlightRecorder odom_only(c, {Eigen::Vector3d(100, 0, 1)});
+  odom_only.start(0.0);
+  rng.seed(3);
+  for (int i = 0; i <= 2000; ++i) {
+    const double t = i * kDt;
+    odom_only.addOdometry(sample(t, Eigen::Vector3d(t + noise(rng), noise(rng), 1), Eigen::Vector3d(1 + noise(rng), 0, 0)));
+    noise(rng);
+  }
+  EXPECT_FALSE(odom_only.summary().measured_on_truth);
+  EXPECT_GT(odom_only.summary().path_length_m, 50.0);
+}
+
+// The oracle's time per goal, and the flight's time over it for the goals reached.
+TEST(FlightRecorder, TimeRatioOverTheOracle) {
+  FlightRecorder rec(FlightRecorder::Config(), {Eigen::Vector3d(10, 0, 1), Eigen::Vector3d(0, 0, 1)});
+  FlightOracle::Result oracle;
+  oracle.ok = true;
+  oracle.time_s = {4.0, 5.0};
+  rec.setOracle(oracle);
+  rec.start(0.0);
+  EXPECT_TRUE(std::isnan(rec.summary().time_ratio));  // no goal reached yet
+  rec.addOdometry(sample(6.0, Eigen::Vector3d(10, 0, 1), Eigen::Vector3d::Zero()));  // goal 1 in 6 s
+  FlightSummary s = rec.summary();
+  EXPECT_NEAR(s.oracle_time_s, 4.0, 1e-12);
+  EXPECT_NEAR(s.reached_time_s, 6.0, 1e-12);
+  EXPECT_NEAR(s.time_ratio, 1.5, 1e-12);
+  rec.addOdometry(sample(16.0, Eigen::Vector3d(0, 0, 1), Eigen::Vector3d::Zero()));  // goal 2 in 10 s
+  s = rec.summary();
+  EXPECT_NEAR(s.time_ratio, 16.0 / 9.0, 1e-12);
+  EXPECT_NE(formatReport(s, "x").find("1.78x"), std::string::npos) << formatReport(s, "x");
+  // An oracle that does not match the goals is not taken.
+  FlightRecorder other(FlightRecorder::Config(), {Eigen::Vector3d(10, 0, 1)});
+  other.setOracle(oracle);
+  other.start(0.0);
+  other.addOdometry(sample(6.0, Eigen::Vector3d(10, 0, 1), Eigen::Vector3d::Zero()));
+  EXPECT_TRUE(std::isnan(other.summary().time_ratio));
+}
+
 // A gap in the odometry (longer than max_sample_gap_s) is neither integrated nor a path jump.
 TEST(FlightRecorder, GapsAndBadSamplesAreNotIntegrated) {
   FlightRecorder rec(FlightRecorder::Config(), {Eigen::Vector3d(100, 0, 1)});

@@ -30,6 +30,36 @@ TEST(TrajectoryConversions, PlannerSplineIsAccepted) {
   EXPECT_TRUE(r.spline.evaluate(0.25).allFinite());
 }
 
+// What the flight monitor's speed account reads: the kind and where the committed stop begins.
+TEST(TrajectoryConversions, KindAndBrakeStartRoundTrip) {
+  ExecTrajectory t;
+  t.id = 4;
+  t.start_time_s = 100.0;
+  t.spline = UniformBspline::straightLine(Eigen::Vector3d(0, 0, 1), Eigen::Vector3d(2, 0, 1), 8, 3, 0.2);
+  t.brake_start_s = 100.4;  // cut: stops before unknown space from 0.4 s on
+  ReceivedTrajectory r;
+  std::string why;
+  ASSERT_TRUE(fromMsg(toMsg(t, "world", 9), &r, &why)) << why;
+  EXPECT_EQ(r.kind, Bspline::KIND_PLAN);
+  EXPECT_NEAR(r.brake_start_s, 100.4, 1e-6);
+  t.braking = true;
+  t.brake_start_s = 1e9;  // past the end: the end
+  ASSERT_TRUE(fromMsg(toMsg(t, "world", 9), &r, &why)) << why;
+  EXPECT_EQ(r.kind, Bspline::KIND_BRAKING);
+  EXPECT_NEAR(r.brake_start_s, t.endTime(), 1e-6);
+  t.braking = false;
+  t.escape = true;
+  ASSERT_TRUE(fromMsg(toMsg(t, "world", 9), &r, &why)) << why;
+  EXPECT_EQ(r.kind, Bspline::KIND_MANOEUVRE);
+  // A foreign kind is a plan; a brake point before the start is the start.
+  Bspline msg = toMsg(t, "world", 9);
+  msg.kind = 200;
+  msg.brake_start = ros::Time(50.0);
+  ASSERT_TRUE(fromMsg(msg, &r, &why)) << why;
+  EXPECT_EQ(r.kind, Bspline::KIND_PLAN);
+  EXPECT_NEAR(r.brake_start_s, 100.0, 1e-6);
+}
+
 // The trajectory_msgs fuzz harness: a knot span of 1.4e-156 s passed isValid(), and the setpoint
 // generator sampled non-finite states from it.
 TEST(TrajectoryConversions, KnotSpansAndCoordinatesBeyondTheBoundsAreRefused) {

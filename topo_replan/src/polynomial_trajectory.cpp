@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "topo_planner/topo_replan/path_speed_profile.h"
+
 namespace topo_planner {
 
 namespace {
@@ -203,14 +205,56 @@ TrajectoryStatus referenceTrajectory(const std::vector<Eigen::Vector3d>& waypoin
     if (config.cruise_timing) t = dist / v + ((i == 1) + (i + 1 == points.size())) * v / a;
     durations.push_back(std::max(t, 0.1));
   }
+  const double v_allowed = std::max({v, start.velocity.norm(), end.velocity.norm()});
+  const double a_allowed = std::max({a, start.acceleration.norm(), end.acceleration.norm()});
+  if (config.profile_timing) {
+    // Segment times from the time-optimal profile (the speed along the path at the limits), then the
+    // segments that break the limits stretched alone: min-snap passes through every waypoint, where
+    // the profile rounds the corner, and slows more there; elsewhere it keeps the profile's pace.
+    PathSpeedProfile::Config pc;
+    pc.max_vel_mps = v;
+    pc.max_acc_mps2 = a;
+    pc.step_m = 0.05;
+    const auto profile = PathSpeedProfile::compute(points, pc, std::min(v, start.velocity.norm()),
+                                                   std::min(v, end.velocity.norm()));
+    if (profile && profile->waypointTimes().size() == points.size()) {
+      const std::vector<double>& wt = profile->waypointTimes();
+      for (size_t i = 1; i < points.size(); ++i) durations[i - 1] = std::max(wt[i] - wt[i - 1], 0.05);
+      for (int k = 0; k <= config.max_rescales; ++k) {
+        const TrajectoryStatus s = minimumSnapTrajectory(points, durations, start, end, out);
+        if (s != TrajectoryStatus::kSuccess) return s;
+        bool ok = true;
+        double t0 = 0.0;
+        for (size_t i = 0; i < durations.size(); ++i) {
+          double vm = 0.0, am = 0.0;
+          const double dt = std::max(0.01, durations[i] / 50.0);
+          for (double t = t0; t <= t0 + durations[i] + 1e-9; t += dt) {
+            vm = std::max(vm, out->velocity(t).norm());
+            am = std::max(am, out->acceleration(t).norm());
+          }
+          t0 += durations[i];
+          const double f = std::max(vm / v_allowed, std::sqrt(am / a_allowed));
+          if (f > 1.0 + 1e-6) {
+            ok = false;
+            durations[i] *= std::min(std::max(f, 1.02), 2.0) * 1.01;
+          }
+        }
+        // The whole trajectory at the limits (sampled finer than the per-segment scan).
+        if (ok && out->maxSpeed() <= v_allowed * (1.0 + 1e-6) && out->maxAcceleration() <= a_allowed * (1.0 + 1e-6))
+          return TrajectoryStatus::kSuccess;
+        if (ok) {  // only the fine sampling sees the excess: stretch everything a little
+          for (double& d : durations) d *= 1.02;
+        }
+      }
+      // Not met segment by segment: the uniform stretch below, from the profile's times.
+    }
+  }
   for (int k = 0; k <= config.max_rescales; ++k) {
     const TrajectoryStatus s = minimumSnapTrajectory(points, durations, start, end, out);
     if (s != TrajectoryStatus::kSuccess) return s;
     // The limits hold, or are broken only as much as the fixed start or end state breaks them
     // (stretching time cannot change those: a vehicle braking harder than the reference's limit
     // starts a reference that way).
-    const double v_allowed = std::max({v, start.velocity.norm(), end.velocity.norm()});
-    const double a_allowed = std::max({a, start.acceleration.norm(), end.acceleration.norm()});
     const double vr = out->maxSpeed() / v_allowed, ar = out->maxAcceleration() / a_allowed;
     if (vr <= 1.0 + 1e-6 && ar <= 1.0 + 1e-6) return TrajectoryStatus::kSuccess;
     // Stretching time by f divides speeds by f and accelerations by f^2 (exactly so when the end

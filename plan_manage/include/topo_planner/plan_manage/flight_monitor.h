@@ -39,6 +39,7 @@
 //     planning/reference_path        nav_msgs/Path            the planner's global reference (each message
 //                                                             is a new reference, kept for the plot)
 //     planning/position_cmd          topo_planner/PositionCommand  the setpoints
+//     planning/bspline               topo_planner/Bspline     the planner's trajectories (the speed account)
 //     planning/heartbeat             topo_planner/PlannerHeartbeat the planner's session and input state
 //     quadrotor_sim/ground_truth     nav_msgs/Odometry        the true state (ground_truth_topic)
 //     quadrotor_sim/fault_event      std_msgs/String          "<kind> <start|end|step> ..." per fault change
@@ -83,7 +84,20 @@
 //   name                       "flight"  file name stem: <name>.csv, <name>_events.csv, <name>_map.csv,
 //                                      <name>_reference.csv, <name>_report.json
 //   shutdown_when_done         false   ros::requestShutdown() once the files are written
+//   max_vel_mps, max_acc_mps2  3.0, 2.5  the flight's limits: the speed account and the oracle [m/s, m/s^2]
+//   speed_account/fast_fraction 0.8    an instant at or above this x max_vel is fast (SpeedAccount)
+//   speed_account/limit_fraction 0.6   commanded accelerations above this x max_acc are at the limits
+//   oracle/clearance_m         0.3     the oracle's route clearance (the planner's search/clearance_m) [m]
+//   oracle/min_z_m, max_z_m    0.3, 3.0  its height band (the planner's route/min_z_m, max_z_m) [m]
 //   density, seed, max_vel_mps, scenario/<key>   (any scalar) copied into the report's "scenario"
+//
+// Speed (the speed account and the oracle): path length, mean and max speed are measured on the
+// ground truth when there is one. Every instant slower than fast_fraction x max_vel is attributed
+// to a cause (SpeedAccount: held, braking, commitment, takeover, tracking, limits, timing) from the
+// setpoint in force and the trajectory it follows; the report gives the shares and the time spent
+// fast. Before goal 1 the oracle (FlightOracle) computes, on the true map, the time an ideal vehicle
+// flying the shortest way at the limits needs per goal; the report gives the flight's time for the
+// goals reached over the oracle's.
 
 #include <geometry_msgs/Point.h>
 #include <geometry_msgs/Vector3Stamped.h>
@@ -91,6 +105,7 @@
 #include <nav_msgs/Path.h>
 #include <ros/ros.h>
 #include <std_msgs/String.h>
+#include <topo_planner/Bspline.h>
 #include <topo_planner/Collision.h>
 #include <topo_planner/PlannerHeartbeat.h>
 #include <topo_planner/PositionCommand.h>
@@ -117,6 +132,7 @@ class FlightMonitor {
   struct Config {
     FlightRecorder::Config recorder;     ///< goal tolerance, timeout, contact check, trace rate
     TruthMap::Config truth;              ///< resolution, window and ESDF of the true map
+    FlightOracle::Config oracle;         ///< the oracle's limits, clearance and height band
     double clearance_exact_within_m = 1.0;  ///< clearances below this are exact [m]
     double ground_z_m = 0.0;             ///< height of the ground plane, an obstacle too [m]
     std::vector<Eigen::Vector3d> goals;  ///< the goal sequence [m]
@@ -157,6 +173,7 @@ class FlightMonitor {
   void referenceCallback(const nav_msgs::PathConstPtr& msg);
   void truthCallback(const nav_msgs::OdometryConstPtr& msg);
   void setpointCallback(const topo_planner::PositionCommandConstPtr& msg);
+  void bsplineCallback(const topo_planner::BsplineConstPtr& msg);
   void heartbeatCallback(const topo_planner::PlannerHeartbeatConstPtr& msg);
   void faultCallback(const std_msgs::StringConstPtr& msg);
   void offsetCallback(const geometry_msgs::Vector3StampedConstPtr& msg);
@@ -172,6 +189,8 @@ class FlightMonitor {
   /// Why the flight cannot start yet ("" when it can).
   std::string notReadyReason() const;
   void sendGoal(int index);
+  /// The oracle's times for the goals (FlightOracle on the true map), before the first goal is sent.
+  void computeOracle();
   void handle(const FlightRecorder::Update& update, double now_s);
   /// Publishes the result, logs the report, writes the files (once).
   void finishFlight(bool publish);
@@ -202,7 +221,9 @@ class FlightMonitor {
   std::unique_ptr<TruthMapSubscriber> truth_sub_;
   std::string cloud_topic_;
   ros::Subscriber odom_sub_, collision_sub_, replan_sub_, reference_sub_;
-  ros::Subscriber truth_state_sub_, setpoint_sub_, heartbeat_sub_, fault_sub_, offset_sub_;
+  ros::Subscriber truth_state_sub_, setpoint_sub_, heartbeat_sub_, fault_sub_, offset_sub_, bspline_sub_;
+  bool have_truth_position_ = false;
+  Eigen::Vector3d truth_position_ = Eigen::Vector3d::Zero();  // the latest true position [m]
   ros::Publisher waypoint_pub_, result_pub_, report_pub_;
   ros::Timer check_timer_;
   ros::SteadyTimer startup_timer_;

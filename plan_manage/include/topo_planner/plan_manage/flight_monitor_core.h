@@ -20,6 +20,8 @@
 #include <vector>
 
 #include "topo_planner/plan_env/occupancy_map.h"
+#include "topo_planner/plan_manage/flight_oracle.h"
+#include "topo_planner/plan_manage/speed_account.h"
 
 namespace topo_planner {
 
@@ -85,6 +87,7 @@ struct GoalRecord {
   double max_speed_mps = 0.0;
   double min_clearance_m = std::numeric_limits<double>::quiet_NaN();  ///< NaN before the first sample [m]
   double distance_m = std::numeric_limits<double>::quiet_NaN();  ///< body to goal at the latest sample [m]
+  double oracle_time_s = std::numeric_limits<double>::quiet_NaN();  ///< the oracle's time for this leg (FlightOracle) [s]
   int replans = 0;               ///< planning calls that published a trajectory
   int replan_failures = 0;       ///< planning calls that did not
   int stalls = 0;                ///< stall re-routes of the FSM while it was active
@@ -100,6 +103,9 @@ struct SetpointSample {
   Eigen::Vector3d position_m = Eigen::Vector3d::Zero();       ///< [m]
   Eigen::Vector3d velocity_mps = Eigen::Vector3d::Zero();     ///< [m/s]
   Eigen::Vector3d acceleration_mps2 = Eigen::Vector3d::Zero();  ///< [m/s^2]
+  SpeedAccount::Mode mode = SpeedAccount::Mode::kTrajectory;  ///< what the server does (the speed account)
+  uint64_t planner_session = 0;                               ///< the trajectory it follows ...
+  int64_t trajectory_id = -1;                                 ///< ... (or followed)
 };
 
 /// A step of the commanded position larger than the motion between two setpoints allows.
@@ -256,8 +262,11 @@ struct FlightSummary {
   int clearance_contacts = 0;  ///< contacts of the monitor's own clearance check
   double min_clearance_m = std::numeric_limits<double>::quiet_NaN();  ///< NaN without samples [m]
   Eigen::Vector3d min_clearance_position_m = Eigen::Vector3d::Zero();
-  double mean_speed_mps = 0.0;  ///< time average of the speed over the flight
+  /// Time average of the speed over the flight, and the largest: of the ground truth when there is
+  /// one (odometry noise adds speed and path that were not flown), else of the odometry.
+  double mean_speed_mps = 0.0;
   double max_speed_mps = 0.0;
+  bool measured_on_truth = false;  ///< speed and path length come from the ground truth
   int replans = 0;
   int replan_failures = 0;
   int stalls = 0;                 ///< stall re-routes (ReplanRecord::stall), not planning calls
@@ -265,7 +274,15 @@ struct FlightSummary {
   double replan_ms_p95 = 0.0;
   double replan_ms_max = 0.0;
   double duration_s = 0.0;      ///< first goal sent to last goal reached (or the end) [s]
-  double path_length_m = 0.0;
+  double path_length_m = 0.0;   ///< flown (ground truth when there is one) [m]
+  // The speed account (SpeedAccount) over the flight, and the oracle (FlightOracle).
+  SpeedAccount::Totals speed;  ///< time fast and time slow per cause
+  double fast_share = 0.0;     ///< share of the counted time at or above the account's fast_fraction x max_vel
+  /// The oracle's time for the goals reached, the flight's time for them, and their ratio (NaN
+  /// without an oracle or a goal reached) [s].
+  double oracle_time_s = std::numeric_limits<double>::quiet_NaN();
+  double reached_time_s = std::numeric_limits<double>::quiet_NaN();
+  double time_ratio = std::numeric_limits<double>::quiet_NaN();
   // The setpoints (SetpointWatch) and the faults.
   int setpoints = 0;            ///< setpoints seen while flying
   int setpoint_jumps = 0;       ///< steps over |v| dt + the margin, re-anchorings excepted
@@ -310,6 +327,7 @@ class FlightRecorder {
     double trace_period_s = 0.05;        ///< odometry rows kept every this long (20 Hz) [s]
     double max_sample_gap_s = 1.0;       ///< larger odometry gaps are not integrated (speed, path) [s]
     SetpointWatch::Config setpoints;     ///< setpoint jumps and accelerations
+    SpeedAccount::Config speed;          ///< the speed account (the flight's limits)
 
     bool validate(std::string* why) const;
   };
@@ -344,8 +362,13 @@ class FlightRecorder {
   /// check when the odometry samples carry none (NaN clearance): odometry may be offset by an
   /// injected jump or stop in a blackout, the true body does neither. Only while flying.
   void addTruth(const OdometrySample& truth);
-  /// A setpoint of the trajectory server (SetpointWatch); only while flying.
+  /// A setpoint of the trajectory server (SetpointWatch, the speed account); only while flying.
   void addSetpoint(const SetpointSample& setpoint);
+  /// A trajectory the planner published (the speed account reads its kind and brake point).
+  void addTrajectory(const SpeedAccount::Trajectory& trajectory) { speed_account_.addTrajectory(trajectory); }
+  /// The oracle's times per goal (FlightOracle::Result::time_s, one per goal); ignored when not ok.
+  void setOracle(const FlightOracle::Result& oracle);
+  const SpeedAccount& speedAccount() const { return speed_account_; }
   /// An injected odometry jump by delta_m at t_s (a setpoint step equal to it re-anchors).
   void addOdometryJump(double t_s, const Eigen::Vector3d& delta_m);
   /// Odometry came back after a blackout at t_s (a setpoint step onto the measured position re-anchors).
@@ -390,6 +413,11 @@ class FlightRecorder {
   double integrated_s_ = 0.0;      // time covered by it [s]
   double path_length_m_ = 0.0;
   double max_speed_mps_ = 0.0;
+  // The same of the ground truth: once a true state arrived, the odometry adds nothing to them.
+  bool truth_seen_ = false;
+  bool have_previous_truth_ = false;
+  OdometrySample previous_truth_;
+  SpeedAccount speed_account_;
   double min_clearance_m_ = std::numeric_limits<double>::quiet_NaN();
   Eigen::Vector3d min_clearance_position_m_ = Eigen::Vector3d::Zero();
   double next_trace_t_s_ = 0.0;  // time slot of the next trace row
@@ -418,6 +446,8 @@ struct ReferenceRecord {
 
 /// One line for the log when a goal ends, e.g. "goal 2/3 reached at t=41.2 s in 20.1 s: ...".
 std::string formatGoalLine(const GoalRecord& goal, int goals_total, double flight_start_s, double now_s);
+/// The speed account's slow causes with their shares, e.g. "timing 61%, limits 22%, held 17%".
+std::string accountLine(const SpeedAccount::Totals& totals);
 /// The multi-line flight report.
 std::string formatReport(const FlightSummary& summary, const std::string& name);
 

@@ -61,6 +61,7 @@
 
 #include "topo_planner/plan_manage/health.h"
 #include "topo_planner/plan_manage/mapping_server.h"
+#include "topo_planner/plan_manage/planner_params.h"
 #include "topo_planner/plan_manage/planner_settings.h"
 #include "topo_planner/PlannerConfig.h"
 #include "topo_planner/PositionCommand.h"
@@ -127,7 +128,7 @@ class PlannerServer {
 
 /// The vehicle's limits (the optimiser's) and the reference's, reference_ratio of them, so that
 /// detours need no time stretching (readPlannerParams and the reconfigure server).
-void setFlightLimits(double max_vel, double max_acc, double reference_ratio, ReplanFsm::Config* fsm);
+
 
 /// Reads the planner's parameters (and the mapping's, under ~mapping) with the struct defaults,
 /// validates them, and returns false after a ROS_ERROR saying what is wrong.

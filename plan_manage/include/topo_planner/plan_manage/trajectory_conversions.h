@@ -31,6 +31,9 @@ struct ReceivedTrajectory {
   UniformBspline spline;
   std::optional<Eigen::Vector3d> heading_target;  ///< set when has_heading_target [m, world]
   bool reanchor = false;                          ///< deliberately starts away from the setpoint
+  uint8_t kind = Bspline::KIND_PLAN;              ///< plan, braking or manoeuvre (an unknown kind: plan)
+  /// Where the committed stop begins (the known-space commitment) [s, ROS time]; not before the start.
+  double brake_start_s = 0.0;
 };
 /// The content of a message; false (with a reason) for an invalid one (too few or non-finite
 /// control points, bad degree or knot span, a non-finite heading target).

@@ -91,10 +91,16 @@ struct ReferenceConfig {
   /// Segment times dist / max_vel, plus max_vel / max_acc on the first and last segment (a
   /// trapezoid over the whole path), instead of a rest-to-rest trapezoid per segment.
   bool cruise_timing = false;
+  /// Segment times from the time-optimal speed profile along the waypoints (PathSpeedProfile: the
+  /// corners as arcs, a forward-backward pass at the limits), and only the segments that break the
+  /// limits stretched (a corner slows the reference there, not everywhere). Overrides cruise_timing.
+  bool profile_timing = false;
 };
 
 /// Minimum-snap trajectory through waypoints, segment times from a trapezoidal speed profile per
-/// segment, then all times stretched until the speed and acceleration limits hold (sampled).
+/// segment (or, with profile_timing, from the time-optimal profile along the path), then times
+/// stretched until the speed and acceleration limits hold (sampled): all of them, or with
+/// profile_timing those of the segments that break the limits (all of them as a last resort).
 TrajectoryStatus referenceTrajectory(const std::vector<Eigen::Vector3d>& waypoints, const FlatState& start,
                                      const FlatState& end, const ReferenceConfig& config, PolynomialTrajectory* out);
 

@@ -1,0 +1,301 @@
+#include "topo_planner/plan_manage/sim_flight.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <sstream>
+
+namespace topo_planner {
+
+Eigen::Isometry3d SimFlight::Config::defaultBodyToCamera() {
+  // Optical frame (x right, y down, z forward) in a FLU body: z_c = x_b, x_c = -y_b, y_c = -z_b.
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() << 0, 0, 1, -1, 0, 0, 0, -1, 0;
+  return T;
+}
+
+bool SimFlight::Config::validate(std::string* why) const {
+  std::ostringstream e;
+  std::string sub;
+  if (!fsm.validate(&sub)) e << "fsm: " << sub << "; ";
+  if (!server.validate(&sub)) e << "server: " << sub << "; ";
+  if (!map.validate(&sub)) e << "map: " << sub << "; ";
+  if (!esdf.validate(&sub)) e << "esdf: " << sub << "; ";
+  if (!camera.camera.valid()) e << "camera intrinsics invalid; ";
+  if (!speed.validate(&sub)) e << "speed: " << sub << "; ";
+  if (!oracle.validate(&sub)) e << "oracle: " << sub << "; ";
+  auto positive = [&](double x, const char* name) {
+    if (!(std::isfinite(x) && x > 0.0)) e << name << " must be positive; ";
+  };
+  positive(camera_rate_hz, "camera_rate_hz");
+  positive(plan_period_s, "plan_period_s");
+  positive(server_period_s, "server_period_s");
+  positive(goal_tolerance_m, "goal_tolerance_m");
+  positive(goal_timeout_s, "goal_timeout_s");
+  if (!(start_delay_s >= 0.0 && std::isfinite(start_delay_s))) e << "start_delay_s must be >= 0; ";
+  if (!(plan_period_s >= server_period_s)) e << "plan_period_s must be at least server_period_s; ";
+  if (!T_body_camera.matrix().allFinite()) e << "T_body_camera must be finite; ";
+  const std::string s = e.str();
+  if (why) *why = s.empty() ? "" : s.substr(0, s.size() - 2);
+  return s.empty();
+}
+
+namespace {
+
+Eigen::Isometry3d bodyPose(const Eigen::Vector3d& p, double yaw) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  T.translation() = p;
+  return T;
+}
+
+SpeedAccount::Mode accountMode(Setpoint::Mode m) {
+  switch (m) {
+    case Setpoint::Mode::kTrajectory: return SpeedAccount::Mode::kTrajectory;
+    case Setpoint::Mode::kEndStop:
+    case Setpoint::Mode::kWatchdogStop: return SpeedAccount::Mode::kStopping;
+    default: return SpeedAccount::Mode::kHold;
+  }
+}
+
+}  // namespace
+
+SimFlight::Result SimFlight::fly(const TruthMap& truth, const Eigen::Vector3d& start,
+                                 const std::vector<Eigen::Vector3d>& goals, const Config& config,
+                                 const Observer& observer) {
+  Result r;
+  std::string why;
+  if (!config.validate(&why)) {
+    r.message = "invalid config: " + why;
+    return r;
+  }
+  if (goals.empty() || !start.allFinite()) {
+    r.message = "no goals, or a non-finite start";
+    return r;
+  }
+  auto occupancy = std::shared_ptr<OccupancyMap>(OccupancyMap::create(config.map, &why));
+  if (!occupancy) {
+    r.message = "map: " + why;
+    return r;
+  }
+  std::unique_ptr<EsdfMap> esdf = EsdfMap::create(config.esdf, occupancy, &why);
+  std::unique_ptr<ReplanFsm> fsm = ReplanFsm::create(config.fsm, &why);
+  if (!esdf || !fsm) {
+    r.message = "planner: " + why;
+    return r;
+  }
+  esdf->updateAll();
+  SetpointGenerator server(config.server);
+  DepthCamera camera(config.camera, truth.esdf());
+  SpeedAccount account(config.speed);
+  ContactCounter contacts(config.collision_radius_m, 0.05);
+  const uint64_t session = 1;
+
+  r.goals.resize(goals.size());
+  for (size_t i = 0; i < goals.size(); ++i) r.goals[i].position = goals[i];
+  if (config.compute_oracle) {
+    const FlightOracle::Result oracle = FlightOracle::compute(truth.esdf(), start, goals, config.oracle);
+    if (oracle.ok)
+      for (size_t i = 0; i < goals.size(); ++i) r.goals[i].oracle_time_s = oracle.time_s[i];
+  }
+
+  // The vehicle: where its setpoint is, at rest at the start until the first trajectory.
+  Eigen::Vector3d position = start, velocity = Eigen::Vector3d::Zero();
+  double yaw = std::atan2(goals[0].y() - start.y(), goals[0].x() - start.x());
+  server.setVehiclePose(position, yaw);
+  const double dt = config.server_period_s;
+  const int plan_every = std::max(1, int(std::lround(config.plan_period_s / dt)));
+  const double frame_period = 1.0 / config.camera_rate_hz;
+  double next_frame_s = 0.0;
+  std::vector<float> depth;
+  size_t active = 0;
+  bool goal_given = false;
+  double goal_given_s = 0.0, flight_start_s = NAN;
+  double speed_integral = 0.0;
+  Setpoint previous_setpoint;
+  bool have_setpoint = false;
+
+  for (long k = 0;; ++k) {
+    const double t = k * dt;
+    // The camera: a frame from where the vehicle is, fused as the mapping node fuses it.
+    if (t + 1e-9 >= next_frame_s) {
+      next_frame_s += frame_period;
+      const Eigen::Isometry3d T_world_camera = bodyPose(position, yaw) * config.T_body_camera;
+      if (camera.render(T_world_camera, &depth)) {
+        DepthImageView view;
+        view.data = reinterpret_cast<const uint8_t*>(depth.data());
+        view.width = config.camera.camera.width;
+        view.height = config.camera.camera.height;
+        view.row_step_bytes = size_t(view.width) * sizeof(float);
+        view.encoding = DepthEncoding::kFloat32;
+        const FusionResult fused = occupancy->fuseDepthImage(view, config.camera.camera, T_world_camera);
+        if (fused.status == MapStatus::kSuccess) {
+          esdf->update(fused.changed_box);
+          fsm->setDepthFused(t);
+        }
+      }
+    }
+    // The mission: the next goal once the camera has looked for start_delay_s, and after each goal.
+    if (!goal_given && t >= config.start_delay_s) {
+      if (std::isnan(flight_start_s)) flight_start_s = t;
+      fsm->setOdometry(t, position, velocity);
+      const GoalStatus status = fsm->setGoals({goals[active]}, *esdf);
+      if (status != GoalStatus::kAccepted) {
+        r.message = "goal " + std::to_string(active + 1) + " refused: " + toString(status);
+        break;
+      }
+      goal_given = true;
+      goal_given_s = t;
+    }
+    // The planner: odometry and the server's setpoint in, the safety check and the tick.
+    const FsmOutput* last_output = nullptr;
+    const ExecTrajectory* published = nullptr;
+    FsmOutput outputs[2];
+    if (k % plan_every == 0) {
+      fsm->setOdometry(t, position, velocity);
+      if (have_setpoint) {
+        ServerSetpoint sp;
+        sp.stamp_s = t;
+        sp.position = previous_setpoint.state.position;
+        sp.velocity = previous_setpoint.state.velocity;
+        switch (previous_setpoint.mode) {
+          case Setpoint::Mode::kHoldBeforeFirst: sp.mode = ServerSetpoint::Mode::kBeforeFirst; break;
+          case Setpoint::Mode::kTrajectory: sp.mode = ServerSetpoint::Mode::kTrajectory; break;
+          case Setpoint::Mode::kEndStop:
+          case Setpoint::Mode::kWatchdogStop: sp.mode = ServerSetpoint::Mode::kStopping; break;
+          case Setpoint::Mode::kHold: sp.mode = ServerSetpoint::Mode::kHold; break;
+        }
+        sp.own_session = previous_setpoint.planner_session == session;
+        sp.trajectory_id = previous_setpoint.trajectory_id;
+        fsm->setServerSetpoint(sp);
+      }
+      outputs[0] = fsm->checkSafety(t, *esdf);
+      const auto t0 = std::chrono::steady_clock::now();
+      outputs[1] = fsm->tick(t, *esdf);
+      const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+      for (FsmOutput& out : outputs) {
+        if (out.event) {
+          (out.event->published ? r.replans : r.replan_failures) += 1;
+          r.replan_ms.push_back(&out == &outputs[1] ? ms : 0.0);
+        }
+        if (out.trajectory) {
+          const ExecTrajectory& traj = *out.trajectory;
+          server.add(session, traj.id, traj.start_time_s, traj.spline,
+                     traj.has_heading_target ? std::optional<Eigen::Vector3d>(traj.heading_target) : std::nullopt,
+                     traj.reanchor);
+          SpeedAccount::Trajectory a;
+          a.session = session;
+          a.id = traj.id;
+          a.start_s = traj.start_time_s;
+          a.brake_start_s = std::min(traj.brake_start_s, traj.endTime());
+          a.kind = traj.braking ? SpeedAccount::TrajectoryKind::kBraking
+                   : traj.escape ? SpeedAccount::TrajectoryKind::kManoeuvre
+                                 : SpeedAccount::TrajectoryKind::kPlan;
+          a.spline = traj.spline;
+          account.addTrajectory(a);
+          r.emergency_stops += traj.braking ? 1 : 0;
+          published = &traj;
+        }
+        if (out.event || out.trajectory || !out.message.empty()) last_output = &out;
+      }
+      if (!outputs[0].server_diverged && !outputs[1].server_diverged) server.noteHeartbeat(t);
+    }
+    // The trajectory server, and the vehicle on its setpoint.
+    Setpoint sp;
+    if (server.sample(t, &sp)) {
+      if (have_setpoint) {
+        const double step = (sp.state.position - previous_setpoint.state.position).norm() -
+                            std::max(sp.state.velocity.norm(), previous_setpoint.state.velocity.norm()) * dt;
+        r.max_setpoint_step_m = std::max(r.max_setpoint_step_m, step);
+      }
+      const double v = sp.state.velocity.norm();
+      if (v > 0.1 && sp.state.acceleration.dot(sp.state.velocity) / v < -(config.fsm.max_brake_acc_mps2 + 0.5))
+        ++r.max_decel_events;
+      position = sp.state.position;
+      velocity = sp.state.velocity;
+      yaw = sp.yaw;
+      previous_setpoint = sp;
+      have_setpoint = true;
+      SpeedAccount::Setpoint as;
+      as.mode = accountMode(sp.mode);
+      as.session = sp.planner_session;
+      as.trajectory_id = sp.trajectory_id;
+      as.velocity = sp.state.velocity;
+      as.acceleration = sp.state.acceleration;
+      account.setSetpoint(as);
+    }
+    // The referee: contacts with the true map, speed, goals.
+    const double clearance = std::min(truth.obstacleDistance(position, 1.0), position.z() - config.ground_z_m);
+    r.min_clearance_m = std::min(r.min_clearance_m, clearance);
+    if (contacts.update(clearance) && goal_given) ++r.collisions;
+    const double speed = velocity.norm();
+    if (!std::isnan(flight_start_s)) {
+      account.addSpeed(t, speed);
+      if (k > 0) {
+        speed_integral += speed * dt;
+        r.path_length_m += speed * dt;
+      }
+      r.max_speed_mps = std::max(r.max_speed_mps, speed);
+    }
+    if (observer) {
+      Step s;
+      s.t_s = t;
+      s.setpoint = previous_setpoint;
+      s.clearance_m = clearance;
+      s.output = last_output;
+      s.published = published;
+      observer(s);
+    }
+    if (goal_given) {
+      Goal& g = r.goals[active];
+      g.time_s = t - goal_given_s;
+      if ((position - g.position).norm() <= config.goal_tolerance_m && speed <= config.goal_max_speed_mps) {
+        g.reached = true;
+        ++r.goals_reached;
+        goal_given = false;
+        if (++active == goals.size()) break;
+        continue;
+      }
+      if (g.time_s > config.goal_timeout_s) {
+        r.message = "goal " + std::to_string(active + 1) + " not reached in " + std::to_string(int(config.goal_timeout_s)) +
+                    " s (" + std::to_string((position - g.position).norm()) + " m away)";
+        break;
+      }
+    }
+    r.duration_s = std::isnan(flight_start_s) ? 0.0 : t - flight_start_s;
+  }
+  r.speed = account.totals();
+  r.fast_share = r.speed.total_s > 0.0 ? r.speed.fast_s / r.speed.total_s : 0.0;
+  r.mean_speed_mps = r.duration_s > 0.0 ? speed_integral / r.duration_s : 0.0;
+  double oracle = 0.0, flown = 0.0;
+  bool known = true;
+  for (const Goal& g : r.goals)
+    if (g.reached) {
+      oracle += g.oracle_time_s;
+      flown += g.time_s;
+      known = known && std::isfinite(g.oracle_time_s);
+    }
+  if (r.goals_reached > 0 && known && oracle > 0.0) {
+    r.oracle_time_s = oracle;
+    r.reached_time_s = flown;
+    r.time_ratio = flown / oracle;
+  }
+  r.ok = r.goals_reached == int(goals.size()) && r.collisions == 0;
+  if (r.message.empty()) r.message = r.ok ? "every goal reached, no contact" : std::to_string(r.collisions) + " contacts";
+  return r;
+}
+
+std::string formatSimFlight(const SimFlight::Result& r) {
+  char text[512];
+  std::snprintf(text, sizeof(text),
+                "goals %d/%zu, collisions %d, min clearance %.2f m, %.1f s (oracle %.1f s, %.2fx), mean %.2f m/s, "
+                "max %.2f m/s, %.0f%% fast, replans %d (%d failed), stops %d",
+                r.goals_reached, r.goals.size(), r.collisions, r.min_clearance_m, r.reached_time_s, r.oracle_time_s,
+                r.time_ratio, r.mean_speed_mps, r.max_speed_mps, 100.0 * r.fast_share, r.replans, r.replan_failures,
+                r.emergency_stops);
+  return text;
+}
+
+}  // namespace topo_planner
