@@ -63,6 +63,7 @@ bool TopoReplanner::Config::validate(std::string* why) const {
   if (astar.margin_doublings < 0 || astar.margin_doublings > 6) err << "astar: margin_doublings must be in [0, 6]; ";
   if (num_threads < 1 || num_threads > 64) err << "num_threads must be in [1, 64]; ";
   if (!(std::isfinite(duration_weight) && duration_weight >= 0.0)) err << "duration_weight must be >= 0; ";
+  if (!(max_selection_delay_ratio >= 1.0)) err << "max_selection_delay_ratio must be >= 1; ";
   const std::string s = err.str();
   if (why) *why = s.empty() ? "" : s.substr(0, s.size() - 2);
   return s.empty();
@@ -388,21 +389,10 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
     });
     result.stats.optimize_ms += msSince(t_opt);
     result.stats.paths += int(guides.size());
-    for (size_t i = first; i < result.candidates.size(); ++i) {
-      const ReplanCandidate& c = result.candidates[i];
-      if (!std::isfinite(c.selection_cost)) continue;
-      ++result.stats.feasible_candidates;
-      // Least cost among the candidates that keep the start velocity (within
-      // max_start_velocity_step_mps); among all only when none does.
-      auto joins = [&](const ReplanCandidate& k) { return k.start_velocity_step_mps <= config_.max_start_velocity_step_mps; };
-      if (result.chosen < 0) {
-        result.chosen = int(i);
-        continue;
-      }
-      const ReplanCandidate& best = result.candidates[size_t(result.chosen)];
-      if ((joins(c) && !joins(best)) || (joins(c) == joins(best) && c.selection_cost < best.selection_cost))
-        result.chosen = int(i);
-    }
+    for (size_t i = first; i < result.candidates.size(); ++i)
+      if (std::isfinite(result.candidates[i].selection_cost)) ++result.stats.feasible_candidates;
+    result.chosen = selectCandidate(result.candidates, config_.max_start_velocity_step_mps,
+                                    config_.max_selection_delay_ratio);
   };
   if (search.status == SearchStatus::kSuccess) optimizeAll(fromStart(search.paths));
 
@@ -469,6 +459,30 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
   result.stats.start_velocity_jump_mps = (result.trajectory.derivative().evaluate(0.0) - request.start.velocity).norm();
   result.stats.total_ms = msSince(t_begin);
   return result;
+}
+
+int TopoReplanner::selectCandidate(const std::vector<ReplanCandidate>& candidates, double max_start_velocity_step_mps,
+                                   double max_selection_delay_ratio) {
+  // Those that keep the start velocity (within max_start_velocity_step_mps) first; among all only
+  // when none does.
+  auto joins = [&](const ReplanCandidate& k) { return k.start_velocity_step_mps <= max_start_velocity_step_mps; };
+  bool any_joins = false;
+  double fastest = INFINITY;
+  for (const ReplanCandidate& k : candidates)
+    if (std::isfinite(k.selection_cost)) any_joins = any_joins || joins(k);
+  for (const ReplanCandidate& k : candidates)
+    if (std::isfinite(k.selection_cost) && (joins(k) || !any_joins)) fastest = std::min(fastest, k.result.spline.duration());
+  // The smoothest among those that reach the local goal about as soon as the fastest: a candidate
+  // stretched in time has less jerk for its slowness alone (jerk falls with the fifth power of the
+  // stretch), and chosen for it, every plan crept round the obstacle it was slowed for.
+  int chosen = -1;
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    const ReplanCandidate& k = candidates[i];
+    if (!std::isfinite(k.selection_cost) || (any_joins && !joins(k))) continue;
+    if (k.result.spline.duration() > max_selection_delay_ratio * fastest + 1e-9) continue;
+    if (chosen < 0 || k.selection_cost < candidates[size_t(chosen)].selection_cost) chosen = int(i);
+  }
+  return chosen;
 }
 
 bool TopoReplanner::repairStart(const FlatState& start, const EsdfMap& map, double time_ratio,
