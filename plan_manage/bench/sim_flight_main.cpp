@@ -17,6 +17,7 @@
 #include "topo_planner/plan_manage/planner_params.h"
 #include "topo_planner/plan_manage/sim_flight.h"
 #include "topo_planner/plan_manage/yaml_params.h"
+#include "topo_planner/topo_replan/plan_problem_io.h"
 
 using namespace topo_planner;
 
@@ -85,6 +86,8 @@ int main(int argc, char** argv) {
   double max_vel = 3.0, max_acc = 2.5, goal_timeout = 90.0;
   std::vector<double> window{-20.0, -10.0, 0.3, 40.0, 20.0, 3.4};
   bool quiet = false;
+  std::string dump_dir;  // --dump-plans DIR FROM TO: every planning problem in [FROM, TO] s (replay_plan)
+  double dump_from = 0.0, dump_to = -1.0;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto need = [&](int n) { return i + n < argc; };
@@ -104,6 +107,11 @@ int main(int argc, char** argv) {
     else if (a == "--json" && need(1)) json = argv[++i];
     else if (a == "--trace" && need(1)) trace = argv[++i];
     else if (a == "--quiet") quiet = true;
+    else if (a == "--dump-plans" && need(3)) {
+      dump_dir = argv[++i];
+      dump_from = std::atof(argv[++i]);
+      dump_to = std::atof(argv[++i]);
+    }
     else if (a == "--window" && need(6)) {
       for (int k = 0; k < 6; ++k) window[size_t(k)] = std::atof(argv[++i]);
     } else {
@@ -181,12 +189,23 @@ int main(int argc, char** argv) {
   std::shared_ptr<const TruthMap> truth = TruthMap::build(points, tc, &why);
   if (!truth) return usage("true map: " + why);
 
+  double sim_now = 0.0;
+  int dumped = 0;
+  if (!dump_dir.empty())
+    c.plan_observer = [&](const EsdfMap& map, const ReplanRequest& request, const ReplanResult& result) {
+      if (sim_now < dump_from || sim_now > dump_to) return;
+      char base[512];
+      std::snprintf(base, sizeof(base), "%s/plan_%03d_t%.2f", dump_dir.c_str(), dumped++, sim_now);
+      std::string error;
+      if (!savePlanProblem(base, map, request, result.message, &error)) std::fprintf(stderr, "sim_flight: %s\n", error.c_str());
+    };
   std::ofstream trace_out;
   if (!trace.empty()) {
     trace_out.open(trace);
     trace_out << "t,x,y,z,vx,vy,vz,speed,yaw,mode,trajectory_id,clearance_m,event\n";
   }
   const SimFlight::Result r = SimFlight::fly(*truth, start, goals, c, [&](const SimFlight::Step& s) {
+    sim_now = s.t_s + c.server_period_s;
     if (!trace_out.is_open()) return;
     const Setpoint& sp = s.setpoint;
     std::string event;
@@ -203,6 +222,12 @@ int main(int argc, char** argv) {
                     p.stops_before_unknown ? " (cut before unknown space)" : "", p.spline.maxVelocity(), p.reference_start_s,
                     p.reference_end_s, p.braking ? " BRAKING" : "", p.escape ? " MANOEUVRE" : "");
       event += text;
+      event += " | speeds";
+      const UniformBspline vel = p.spline.derivative();
+      for (double tau = 0.0; tau <= p.spline.duration() + 1e-9; tau += 0.2) {
+        std::snprintf(text, sizeof(text), " %.2f", vel.evaluate(tau).norm());
+        event += text;
+      }
       if (s.output && s.output->plan) {
         const ReplanResult& plan = *s.output->plan;
         std::snprintf(text, sizeof(text), " | searched %d, %zu candidates, chosen %d, local goal %.2f-%.2f s",

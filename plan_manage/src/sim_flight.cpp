@@ -87,6 +87,7 @@ SimFlight::Result SimFlight::fly(const TruthMap& truth, const Eigen::Vector3d& s
     return r;
   }
   esdf->updateAll();
+  if (config.plan_observer) fsm->setPlanObserver(config.plan_observer);
   SetpointGenerator server(config.server);
   DepthCamera camera(config.camera, truth.esdf());
   SpeedAccount account(config.speed);
@@ -197,6 +198,13 @@ SimFlight::Result SimFlight::fly(const TruthMap& truth, const Eigen::Vector3d& s
           account.addTrajectory(a);
           r.emergency_stops += traj.braking ? 1 : 0;
           published = &traj;
+        }
+        if (out.new_reference) {
+          const PolynomialTrajectory ref = fsm->reference();
+          char text[160];
+          std::snprintf(text, sizeof(text), "; reference of %.2f s, %zu segments, max speed %.2f m/s", ref.duration(),
+                        ref.segments().size(), ref.maxSpeed(0.05));
+          out.message += text;
         }
         if (out.event || out.trajectory || !out.message.empty()) last_output = &out;
       }

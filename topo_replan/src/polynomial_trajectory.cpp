@@ -3,6 +3,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <numeric>
 
 #include "topo_planner/topo_replan/path_speed_profile.h"
 
@@ -215,14 +216,23 @@ TrajectoryStatus referenceTrajectory(const std::vector<Eigen::Vector3d>& waypoin
     pc.max_vel_mps = v;
     pc.max_acc_mps2 = a;
     pc.step_m = 0.05;
-    const auto profile = PathSpeedProfile::compute(points, pc, std::min(v, start.velocity.norm()),
-                                                   std::min(v, end.velocity.norm()));
+    // The ends' speeds along the path (a start moving away from the route counts as at rest).
+    auto along = [](const Eigen::Vector3d& vel, const Eigen::Vector3d& from, const Eigen::Vector3d& to) {
+      const Eigen::Vector3d d = to - from;
+      return d.norm() > 1e-9 ? std::max(0.0, vel.dot(d) / d.norm()) : 0.0;
+    };
+    const size_t n = points.size();
+    const auto profile = PathSpeedProfile::compute(points, pc, std::min(v, along(start.velocity, points[0], points[1])),
+                                                   std::min(v, along(end.velocity, points[n - 2], points[n - 1])));
     if (profile && profile->waypointTimes().size() == points.size()) {
       const std::vector<double>& wt = profile->waypointTimes();
-      for (size_t i = 1; i < points.size(); ++i) durations[i - 1] = std::max(wt[i] - wt[i - 1], 0.05);
+      std::vector<double> base(durations.size());
+      for (size_t i = 1; i < points.size(); ++i) base[i - 1] = std::max(wt[i] - wt[i - 1], 0.05);
+      durations = base;
       for (int k = 0; k <= config.max_rescales; ++k) {
         const TrajectoryStatus s = minimumSnapTrajectory(points, durations, start, end, out);
         if (s != TrajectoryStatus::kSuccess) return s;
+        std::vector<double> factor(durations.size(), 1.0);
         bool ok = true;
         double t0 = 0.0;
         for (size_t i = 0; i < durations.size(); ++i) {
@@ -236,19 +246,26 @@ TrajectoryStatus referenceTrajectory(const std::vector<Eigen::Vector3d>& waypoin
           const double f = std::max(vm / v_allowed, std::sqrt(am / a_allowed));
           if (f > 1.0 + 1e-6) {
             ok = false;
-            durations[i] *= std::min(std::max(f, 1.02), 2.0) * 1.01;
+            // The segment, and half as much its neighbours: min-snap couples them through the free
+            // derivatives at their common waypoints (a segment stretched alone can push its
+            // excess into the next one, and the stretching then diverged: 2e12 s for 30 m).
+            const double g = std::min(std::max(f, 1.02), 1.5) * 1.01;
+            factor[i] = std::max(factor[i], g);
+            if (i > 0) factor[i - 1] = std::max(factor[i - 1], std::sqrt(g));
+            if (i + 1 < durations.size()) factor[i + 1] = std::max(factor[i + 1], std::sqrt(g));
           }
         }
         // The whole trajectory at the limits (sampled finer than the per-segment scan).
         if (ok && out->maxSpeed() <= v_allowed * (1.0 + 1e-6) && out->maxAcceleration() <= a_allowed * (1.0 + 1e-6))
           return TrajectoryStatus::kSuccess;
-        if (ok) {  // only the fine sampling sees the excess: stretch everything a little
-          for (double& d : durations) d *= 1.02;
-        }
+        if (ok) std::fill(factor.begin(), factor.end(), 1.02);  // only the fine sampling sees the excess
+        for (size_t i = 0; i < durations.size(); ++i) durations[i] = std::min(durations[i] * factor[i], 4.0 * base[i]);
       }
       // Not met segment by segment: the uniform stretch below, from the profile's times.
+      durations = base;
     }
   }
+  const double initial_total = std::accumulate(durations.begin(), durations.end(), 0.0);
   for (int k = 0; k <= config.max_rescales; ++k) {
     const TrajectoryStatus s = minimumSnapTrajectory(points, durations, start, end, out);
     if (s != TrajectoryStatus::kSuccess) return s;
@@ -256,7 +273,12 @@ TrajectoryStatus referenceTrajectory(const std::vector<Eigen::Vector3d>& waypoin
     // (stretching time cannot change those: a vehicle braking harder than the reference's limit
     // starts a reference that way).
     const double vr = out->maxSpeed() / v_allowed, ar = out->maxAcceleration() / a_allowed;
-    if (vr <= 1.0 + 1e-6 && ar <= 1.0 + 1e-6) return TrajectoryStatus::kSuccess;
+    if (vr <= 1.0 + 1e-6 && ar <= 1.0 + 1e-6) {
+      // A reference stretched far beyond its first timing is no plan to fly (and its length in time
+      // costs every loop over it): the limits cannot be met from this start.
+      return out->duration() <= kMaxReferenceStretch * initial_total + 10.0 ? TrajectoryStatus::kSuccess
+                                                                            : TrajectoryStatus::kInfeasible;
+    }
     // Stretching time by f divides speeds by f and accelerations by f^2 (exactly so when the end
     // derivatives are zero; otherwise the loop iterates).
     const double f = std::max({vr, std::sqrt(ar), 1.02});

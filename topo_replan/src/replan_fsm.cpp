@@ -6,125 +6,9 @@
 #include <utility>
 
 #include "topo_planner/bspline_opt/bspline_costs.h"
+#include "topo_planner/topo_replan/stop_profile.h"
 
 namespace topo_planner {
-namespace {
-
-// A trajectory's path from time tau0 on, by arc length: where a stop along the path goes. Past the
-// path's end it continues straight along the last direction (a stop longer than the path).
-class PathByLength {
- public:
-  PathByLength(const UniformBspline& spline, double tau0, double dt) {
-    const double T = spline.duration();
-    for (double tau = std::clamp(tau0, 0.0, T);; tau = std::min(T, tau + dt)) {
-      const Eigen::Vector3d p = spline.evaluate(tau);
-      s_.push_back(p_.empty() ? 0.0 : s_.back() + (p - p_.back()).norm());
-      p_.push_back(p);
-      if (tau >= T) break;
-    }
-    direction_ = spline.derivative().evaluate(T);
-    for (size_t i = p_.size(); direction_.norm() < 1e-6 && i >= 2; --i) direction_ = p_[i - 1] - p_[i - 2];
-    if (direction_.norm() > 1e-9) direction_.normalize();
-  }
-  void setDirection(const Eigen::Vector3d& d) {
-    if (d.norm() > 1e-9) direction_ = d.normalized();
-  }
-  double length() const { return s_.back(); }
-  Eigen::Vector3d at(double s) const {
-    if (s >= s_.back()) return p_.back() + (s - s_.back()) * direction_;
-    const size_t i = size_t(std::upper_bound(s_.begin(), s_.end(), s) - s_.begin());
-    if (i == 0) return p_.front();
-    const double span = s_[i] - s_[i - 1];
-    const double f = span > 0.0 ? (s - s_[i - 1]) / span : 0.0;
-    return p_[i - 1] + f * (p_[i] - p_[i - 1]);
-  }
-
- private:
-  std::vector<double> s_;
-  std::vector<Eigen::Vector3d> p_;
-  Eigen::Vector3d direction_ = Eigen::Vector3d::Zero();
-};
-
-// A stop from speed v along a path: the acceleration along it goes from its present value a0 to the
-// deceleration a within kOnsetRamp seconds per a (a linear ramp), holds a, and eases back to 0 over
-// the last kStopRamp seconds, so that the cubic spline fitted to it (which starts with the flown
-// acceleration and ends with none) need not overshoot a anywhere. A stop that began at full
-// deceleration however the vehicle accelerated (the earlier profile) made the fit ring: 4-5 m/s^2
-// commanded for a 2.5 m/s^2 brake, 6-8 m/s^2 for a harder one. Integrated numerically (2 ms steps).
-class StopProfile {
- public:
-  static constexpr double kOnsetRamp = 0.1;  // [s per a] from no acceleration to full deceleration
-  static constexpr double kStopRamp = 0.2;   // [s] from full deceleration to none, at the end
-  static constexpr double kStep = 0.002;     // [s]
-  /// keep_samples false: only length() is kept (the commitment sizes many stops).
-  StopProfile(double speed, double decel, double start_acc, bool keep_samples = true) {
-    s_.push_back(0.0);
-    double v = std::isfinite(speed) ? std::max(0.0, speed) : 0.0;
-    if (v <= 1e-6) return;
-    const double a = std::isfinite(decel) && decel > 1e-3 ? decel : 1e-3;
-    const double j_on = a / kOnsetRamp, j_off = a / kStopRamp;
-    double acc = std::isfinite(start_acc) ? std::clamp(start_acc, -4.0 * a, 4.0 * a) : -a;
-    double dist = 0.0;
-    bool easing = false;
-    for (int k = 0; k < 1000000; ++k) {
-      // Ease off once the speed left is what the ramp from this deceleration to none takes away.
-      if (acc < 0.0 && v <= acc * acc / (2.0 * j_off)) easing = true;
-      double next;
-      if (easing) next = std::min(0.0, acc + j_off * kStep);
-      else if (acc > -a) next = std::max(-a, acc - j_on * kStep);
-      else next = std::min(-a, acc + j_on * kStep);
-      const double v_next = v + 0.5 * (acc + next) * kStep;
-      if (v_next <= 0.0 || (easing && next >= 0.0)) {
-        // At rest within this step (the speed falls about linearly over it).
-        const double f = v_next < 0.0 ? v / (v - v_next) : 1.0;
-        s_.push_back(dist + 0.5 * v * f * kStep + (v_next > 0.0 ? 0.5 * v_next * kStep : 0.0));
-        end_fraction_ = f;
-        return;
-      }
-      dist += 0.5 * (v + v_next) * kStep;
-      v = v_next;
-      acc = next;
-      if (keep_samples) s_.push_back(dist);
-    }
-  }
-  /// (With keep_samples only.)
-  double duration() const { return s_.size() <= 1 ? 0.0 : (double(s_.size()) - 2.0 + end_fraction_) * kStep; }
-  double length() const { return s_.back(); }
-  double distance(double tau) const {
-    if (!(tau > 0.0) || s_.size() <= 1) return 0.0;
-    if (tau >= duration()) return s_.back();
-    const double x = tau / kStep;
-    const size_t i = std::min(s_.size() - 2, size_t(x));
-    const double span = i + 2 == s_.size() ? end_fraction_ : 1.0;
-    const double f = span > 0.0 ? std::clamp((x - double(i)) / span, 0.0, 1.0) : 1.0;
-    return s_[i] + f * (s_[i + 1] - s_[i]);
-  }
-
- private:
-  std::vector<double> s_;  // distance every kStep from the start; the last step may be a fraction
-  double end_fraction_ = 1.0;
-};
-
-// The acceleration of `a` along the unit direction of `v` (0 at rest).
-double alongAcceleration(const Eigen::Vector3d& v, const Eigen::Vector3d& a) {
-  const double speed = v.norm();
-  return speed > 1e-6 ? a.dot(v) / speed : 0.0;
-}
-
-// Positions every `interval` of a stop from speed v along `path` (from arc length s0) at
-// deceleration a (StopProfile).
-std::vector<Eigen::Vector3d> stopPoints(const PathByLength& path, double s0, double v, double a, double a0,
-                                        double* interval) {
-  const StopProfile stop(v, a, a0);
-  const double T = stop.duration();
-  const int n = std::max(4, int(std::ceil(T / 0.05)));
-  *interval = T > 0.0 ? T / n : 0.1;
-  std::vector<Eigen::Vector3d> points;
-  for (int k = 0; k <= n; ++k) points.push_back(path.at(s0 + (T > 0.0 ? stop.distance(k * *interval) : 0.0)));
-  return points;
-}
-
-}  // namespace
 
 const char* toString(FsmState state) {
   switch (state) {
@@ -185,6 +69,8 @@ bool ReplanFsm::Config::validate(std::string* why) const {
   if (!(brake_acc_mps2 > 0.0) || !std::isfinite(brake_acc_mps2)) return bad("brake_acc_mps2 must be positive");
   if (!(max_brake_acc_mps2 >= brake_acc_mps2) || !std::isfinite(max_brake_acc_mps2))
     return bad("max_brake_acc_mps2 must be >= brake_acc_mps2");
+  if (!(commit_brake_acc_mps2 > 0.0 && commit_brake_acc_mps2 <= max_brake_acc_mps2))
+    return bad("commit_brake_acc_mps2 must be in (0, max_brake_acc_mps2]");
   if (!(escape_clearance_m > 0.0) || !std::isfinite(escape_clearance_m)) return bad("escape_clearance_m must be positive");
   if (!(escape_speed_mps > 0.0) || !std::isfinite(escape_speed_mps)) return bad("escape_speed_mps must be positive");
   if (!(escape_min_clearance_m > 0.0) || !(escape_min_clearance_m <= escape_clearance_m))
@@ -210,6 +96,7 @@ bool ReplanFsm::Config::validate(std::string* why) const {
     return bad("backoff lengths must satisfy 0 <= backoff_length_m <= max_backoff_length_m <= 20");
   if (max_backoffs < 0) return bad("max_backoffs must be >= 0");
   if (max_look_holds < 1) return bad("max_look_holds must be >= 1");
+  if (!(look_hold_min_s >= 0.0) || !std::isfinite(look_hold_min_s)) return bad("look_hold_min_s must be >= 0");
   if (!(backoff_speed_mps > 0.0) || !std::isfinite(backoff_speed_mps)) return bad("backoff_speed_mps must be positive");
   if (!(mission_timeout_s >= 0.0) || std::isnan(mission_timeout_s)) return bad("mission_timeout_s must be >= 0 (0: automatic)");
   if (!(progress_timeout_s >= 0.0) || std::isnan(progress_timeout_s)) return bad("progress_timeout_s must be >= 0 (0: off)");
@@ -542,6 +429,7 @@ void ReplanFsm::observeClockLocked(double now, FsmOutput* out) {
   if (server_) shiftOld(&server_->stamp_s);
   shiftOld(&server_anchor_s_);
   last_progress_s_ += shift;  // read from this clock
+  look_hold_since_s_ += shift;
   progress_.shift(shift);
   progress_tick_s_ += shift;
   rest_retry_after_s_ += shift;    // the paced retries keep their pace
@@ -776,146 +664,29 @@ ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::s
   return brake;
 }
 
-double ReplanFsm::bandExcess(double z) const {
-  return heightBandExcess(z, config_.route.min_z_m, config_.route.max_z_m);
-}
-
-bool ReplanFsm::committable(const EsdfMap& map, const Eigen::Vector3d& p, double start_excess) const {
-  // The height band (route/min_z_m, max_z_m, a geofence): no farther out of it than the plan's start
-  // (a take-off from below the band climbs into it; a plan from inside stays inside).
-  if (bandExcess(p.z()) > start_excess + 1e-3) return false;
-  // Only around a hover the planner did not fly to (a mission's start, a re-anchoring): around any
-  // plan's start, each plan would commit known_start_radius_m further into unobserved space (a
-  // creep at a metre per second into space the camera cannot see, e.g. above or below it).
-  if (known_anchor_ && (p - *known_anchor_).norm() <= config_.known_start_radius_m) return true;
-  // Observed free with the clearance all round: the ESDF counts only observed obstacles, so a point
-  // in seen air beside an unseen face (below or beside the camera's view) would pass on distance.
-  // Around the anchor the clearance ball of every exempt point counts as known too: the camera's
-  // blind zone beside and above a vehicle that starts from a hover (its view is a cone from the
-  // camera) would otherwise hold it there.
-  const DistanceQuery q = map.query(p);
-  if (q.status != QueryStatus::kOk || q.distance < config_.safety_clearance_m) return false;
-  const double anchor_ball = config_.known_start_radius_m + config_.safety_clearance_m;
-  return map.occupancy().isKnownWithin(p, config_.safety_clearance_m, [&](const Eigen::Vector3d& c) {
-    return known_anchor_ && (c - *known_anchor_).norm() <= anchor_ball;
-  });
+KnownSpaceCommitment::Config ReplanFsm::commitmentConfig(const Config& c) {
+  KnownSpaceCommitment::Config k;
+  k.enabled = c.commit_to_known_space;
+  k.clearance_m = c.safety_clearance_m;
+  k.known_start_radius_m = c.known_start_radius_m;
+  k.margin_m = c.commit_margin_m;
+  k.brake_acc_mps2 = c.commit_brake_acc_mps2;
+  k.max_brake_acc_mps2 = c.max_brake_acc_mps2;
+  k.min_z_m = c.route.min_z_m;
+  k.max_z_m = c.route.max_z_m;
+  k.sample_s = c.safety_sample_s;
+  return k;
 }
 
 bool ReplanFsm::commitToKnownSpace(const UniformBspline& plan, double t0, const EsdfMap& map, ExecTrajectory* traj,
                                    std::string* why) const {
-  traj->spline = plan;
-  traj->brake_start_s = t0 + plan.duration();
-  traj->stops_before_unknown = false;
-  traj->has_heading_target = false;
-  if (!config_.commit_to_known_space) return true;
-  // The plan sampled by time, with arc length, up to its first point that may not be committed to.
-  const double T = plan.duration(), dt = config_.safety_sample_s;
-  const UniformBspline vel = plan.derivative();
-  const Eigen::Vector3d start = plan.evaluate(0.0);
-  const double start_excess = bandExcess(start.z());
-  const UniformBspline acc = vel.derivative();
-  std::vector<double> taus, arc, speed, along;  // along: the acceleration along the path
-  double blocked_s = -1.0;
-  Eigen::Vector3d prev = start;
-  for (double tau = 0.0;; tau = std::min(T, tau + dt)) {
-    const Eigen::Vector3d p = plan.evaluate(tau);
-    const double s = arc.empty() ? 0.0 : arc.back() + (p - prev).norm();
-    prev = p;
-    // (Not where the vehicle is: the start, and a hold there. After an odometry jump, or beside space
-    // that became unknown when the window scrolled, it holds and looks instead of failing every plan.)
-    if ((p - start).norm() > 1e-6 && !committable(map, p, start_excess)) {
-      blocked_s = s;
-      break;
-    }
-    taus.push_back(tau);
-    arc.push_back(s);
-    const Eigen::Vector3d v_tau = vel.evaluate(tau);
-    speed.push_back(tau >= T ? 0.0 : v_tau.norm());
-    along.push_back(tau >= T ? 0.0 : alongAcceleration(v_tau, acc.evaluate(tau)));
-    if (tau >= T) break;
-  }
-  if (blocked_s < 0.0) return true;  // all of it is known free: flown as planned
-
-  // The last sample from which (and from every one before it) a stop along the path at the planning
-  // deceleration ends `margin` before the blocked point. The stop is fitted as one spline with the
-  // part flown as planned, and the fit may swerve a few centimetres where the deceleration starts or
-  // ends: where that leaves the known free space (a path that runs along its edge), the stop is cut
-  // again with a wider margin.
-  const double a = config_.brake_acc_mps2;
-  const Eigen::Vector3d v0 = vel.evaluate(0.0), a0 = acc.evaluate(0.0);
-  double tau_b = 0.0;
-  bool cut = false;
-  // Stop lengths from each sample, at the planning deceleration computed once (shared by the margins).
-  std::vector<double> length_at_a(taus.size(), -1.0);
-  auto stopLength = [&](size_t k, double decel) {
-    if (decel != a) return StopProfile(speed[k], decel, along[k], false).length();
-    if (length_at_a[k] < 0.0) length_at_a[k] = StopProfile(speed[k], a, along[k], false).length();
-    return length_at_a[k];
-  };
-  for (const double margin : {config_.commit_margin_m, config_.commit_margin_m + 0.15, config_.commit_margin_m + 0.4}) {
-    size_t kb = 0;
-    while (kb + 1 < taus.size() && stopLength(kb + 1, a) + margin <= blocked_s - arc[kb + 1]) ++kb;
-    double a_stop = a;
-    const double room = blocked_s - arc[kb] - margin;
-    // A wider margin is no reason to brake harder than planned: only the first may need that.
-    if (margin > config_.commit_margin_m && stopLength(kb, a) > room) break;
-    // Even now it cannot stop before unknown space at the planning limit (the map shrank or the
-    // start is already too close): stop harder, as hard as the vehicle allows.
-    while (a_stop < config_.max_brake_acc_mps2 && stopLength(kb, a_stop) > room)
-      a_stop = std::min(config_.max_brake_acc_mps2, 1.15 * a_stop);
-    // Flown as planned to tau_b, then a stop along the same path, refitted as one spline.
-    tau_b = taus[kb];
-    const double v_b = speed[kb];
-    const StopProfile stop(v_b, a_stop, along[kb]);
-    const double T_stop = v_b > 1e-3 ? stop.duration() : 0.0, T_total = tau_b + T_stop;
-    const PathByLength path(plan, tau_b, 0.01);
-    if (T_total < 0.05 && v0.norm() < 0.05 && a0.norm() < 0.5) {
-      // At rest at the edge of the known space: hold, and look where the plan goes.
-      traj->spline = UniformBspline::straightLine(start, start, 6, 3, 0.1);
-    } else {
-      // (At least 0.2 s: the end of a stop still decelerating eases to rest instead of a step to a hold.)
-      const double T_fit = std::max(T_total, 0.2);
-      const int n = std::max(6, int(std::ceil(T_fit / 0.05)));
-      const double h = T_fit / n;
-      std::vector<Eigen::Vector3d> points;
-      for (int k = 0; k <= n; ++k) {
-        const double tau = k * h;
-        if (tau <= tau_b) {
-          points.push_back(plan.evaluate(tau));
-        } else {
-          points.push_back(path.at(stop.distance(tau - tau_b)));
-        }
-      }
-      UniformBspline fitted;
-      if (!UniformBspline::fitToPoints(points, h, v0, a0, Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), 3, &fitted)) {
-        *why = "known-space commitment: the cut trajectory could not be fitted";
-        return false;
-      }
-      traj->spline = fitted;
-    }
-    // The cut trajectory is checked as it will be flown.
-    const double D = traj->spline.duration();
-    cut = true;
-    for (double tau = 0.0;; tau = std::min(D, tau + dt)) {
-      const Eigen::Vector3d q = traj->spline.evaluate(tau);
-      if ((q - start).norm() > 1e-6 && !committable(map, q, start_excess)) {
-        *why = "known-space commitment: the cut trajectory leaves the known free space " + std::to_string(tau) +
-               " s after its start";
-        cut = false;
-        break;
-      }
-      if (tau >= D) break;
-    }
-    if (cut) break;
-  }
-  if (!cut) return false;
-  why->clear();
-  traj->brake_start_s = t0 + std::min(tau_b, traj->spline.duration());
-  traj->stops_before_unknown = true;
-  // The camera should look past the stop, along the plan.
-  const PathByLength ahead(plan, 0.0, 0.02);
-  traj->heading_target = ahead.at(std::min(ahead.length(), blocked_s + 1.0));
-  traj->has_heading_target = true;
+  KnownSpaceCommitment::Committed c;
+  if (!KnownSpaceCommitment(commitmentConfig(config_)).commit(plan, map, known_anchor_, &c, why)) return false;
+  traj->spline = std::move(c.spline);
+  traj->brake_start_s = t0 + c.brake_start_tau_s;
+  traj->stops_before_unknown = c.stops_before_unknown;
+  traj->has_heading_target = c.heading_target.has_value();
+  if (c.heading_target) traj->heading_target = *c.heading_target;
   return true;
 }
 
@@ -1600,10 +1371,17 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
                            (traj.spline.evaluate(traj.spline.duration()) - traj.spline.evaluate(0.0)).norm() < 0.3;
     const bool same_place = look_holds_ > 0 && (request.start.position - look_hold_position_).norm() < 0.3;
     look_holds_ = look_hold ? (same_place ? look_holds_ + 1 : 1) : 0;
-    if (look_hold && !same_place) look_hold_position_ = request.start.position;
+    if (look_hold && !same_place) {
+      look_hold_position_ = request.start.position;
+      look_hold_since_s_ = t;
+    }
     std::optional<ExecTrajectory> backoff;
     std::string backoff_report;
-    if (config_.global_route && look_holds_ >= config_.max_look_holds && backoffs_ < config_.max_backoffs) {
+    // (Held for look_hold_min_s too: the plans of a hold come every tick, and the camera turning
+    // round towards the way on needs its time; 5 holds in 0.25 s backed a vehicle off that had just
+    // reached a goal and turned to the next one behind it.)
+    if (config_.global_route && look_holds_ >= config_.max_look_holds && t - look_hold_since_s_ >= config_.look_hold_min_s &&
+        backoffs_ < config_.max_backoffs) {
       // From the takeover time, as the plan it replaces (the hold published last tick may start
       // between now and then: taking over at t would leave it out).
       backoff = backoffTrajectoryLocked(t_take, map, &backoff_report);

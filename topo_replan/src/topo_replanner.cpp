@@ -48,6 +48,8 @@ bool TopoReplanner::Config::validate(std::string* why) const {
   if (!search.validate(&sub)) err << "search: " << sub << "; ";
   if (!optimizer.validate(&sub)) err << "optimizer: " << sub << "; ";
   if (!(std::isfinite(horizon_m) && horizon_m > 0.0)) err << "horizon_m must be positive; ";
+  if (!(std::isfinite(horizon_time_s) && horizon_time_s >= 0.0 && horizon_time_s <= 10.0))
+    err << "horizon_time_s must be in [0, 10]; ";
   if (!(std::isfinite(reference_clearance_m) && reference_clearance_m >= 0.0)) err << "reference_clearance_m must be >= 0; ";
   if (!(std::isfinite(local_goal_margin_m) && local_goal_margin_m >= 0.0)) err << "local_goal_margin_m must be >= 0; ";
   if (!(std::isfinite(max_local_goal_extension_m) && max_local_goal_extension_m >= 0.0))
@@ -150,7 +152,10 @@ LocalProblem TopoReplanner::localProblem(const EsdfMap& map, const ReplanRequest
   };
   double arc = 0.0, t_h = t0, last_collision_s = -1.0;
   Eigen::Vector3d previous = start.position;
-  while (t_h < T && arc < config_.horizon_m) {
+  // At speed, horizon_time_s of flight (a plan that ends moving must end further ahead than the
+  // vehicle needs to stop, or one failed replan brakes it: at 4.5 m/s a 7 m plan ended 1.6 s ahead).
+  const double horizon = std::max(config_.horizon_m, config_.horizon_time_s * start.velocity.norm());
+  while (t_h < T && arc < horizon) {
     const double t_next = std::min(T, t_h + dt);
     const Eigen::Vector3d p = ref.position(t_next);
     arc += (p - previous).norm();
@@ -243,19 +248,86 @@ LocalProblem TopoReplanner::localProblem(const EsdfMap& map, const ReplanRequest
     return fail(ReplanStatus::kInvalidInput, text);
   }
   const int segments = std::max(4, int(wanted));
-  const double ref_step = (t_g - t0) / segments;
-  const double interval = ref_step * (ref_arc > 1e-3 ? std::max(1.0, seg_arc / ref_arc) : 1.0);
-  if (!(interval > 1e-4)) return fail(ReplanStatus::kInvalidInput, "the local segment is too short to replan");
-  std::vector<Eigen::Vector3d> points{start.position};
-  for (int k = 1; k <= segments; ++k) points.push_back(ref.position(t0 + k * ref_step));
-  if (!UniformBspline::fitToPoints(points, interval, start.velocity, start.acceleration, ref.velocity(t_g),
-                                   ref.acceleration(t_g), 3, &lp.initial))
-    return fail(ReplanStatus::kInvalidInput, "the reference segment could not be fitted");
+  Eigen::Vector3d goal_velocity = ref.velocity(t_g), goal_acceleration = ref.acceleration(t_g);
+  if (config_.profile_timing) {
+    if (!profileTimedSegment(ref, start, t0, t_g, segments, &goal_velocity, &goal_acceleration, &lp.initial))
+      return fail(ReplanStatus::kInvalidInput, "the reference segment could not be timed and fitted");
+  } else {
+    const double ref_step = (t_g - t0) / segments;
+    const double interval = ref_step * (ref_arc > 1e-3 ? std::max(1.0, seg_arc / ref_arc) : 1.0);
+    if (!(interval > 1e-4)) return fail(ReplanStatus::kInvalidInput, "the local segment is too short to replan");
+    std::vector<Eigen::Vector3d> points{start.position};
+    for (int k = 1; k <= segments; ++k) points.push_back(ref.position(t0 + k * ref_step));
+    if (!UniformBspline::fitToPoints(points, interval, start.velocity, start.acceleration, goal_velocity,
+                                     goal_acceleration, 3, &lp.initial))
+      return fail(ReplanStatus::kInvalidInput, "the reference segment could not be fitted");
+  }
   lp.initial_length_m = seg_arc;
-  lp.goal_velocity = ref.velocity(t_g);
-  lp.goal_acceleration = ref.acceleration(t_g);
+  lp.goal_velocity = goal_velocity;
+  lp.goal_acceleration = goal_acceleration;
   lp.status = ReplanStatus::kSuccess;
   return lp;
+}
+
+bool TopoReplanner::profileTimedSegment(const PolynomialTrajectory& ref, const FlatState& start, double t0, double t_g,
+                                        int segments, Eigen::Vector3d* goal_velocity,
+                                        Eigen::Vector3d* goal_acceleration, UniformBspline* out) const {
+  // The segment's path, as the reference's timing gives it (the start, then the reference's points
+  // from t0 to t_g), and at each point the reference's own speed as a cap: where the reference
+  // slows (a corner, the goal) the segment slows too. The speed along it is the fastest within
+  // those caps from the start's speed at the acceleration limit (a forward-backward pass over
+  // arc length), so a vehicle slower than the reference is not asked to be where the reference is.
+  struct Point {
+    Eigen::Vector3d p;
+    double s, cap;
+  };
+  std::vector<Point> path{{start.position, 0.0, INFINITY}};
+  const double dt = config_.reference_sample_s;
+  for (double t = t0 + dt;; t = std::min(t_g, t + dt)) {
+    const Eigen::Vector3d p = ref.position(t);
+    const double step = (p - path.back().p).norm();
+    if (step >= 0.02 || t >= t_g) path.push_back({p, path.back().s + step, ref.velocity(t).norm()});
+    if (t >= t_g) break;
+  }
+  const size_t n = path.size();
+  if (n < 2 || !(path.back().s > 1e-6)) return false;
+  const double a = config_.optimizer.max_acc_mps2 * config_.optimizer.feasibility_margin;
+  const double vmax = config_.optimizer.max_vel_mps;
+  std::vector<double> v(n);
+  v[n - 1] = std::min(vmax, path[n - 1].cap);
+  for (size_t i = n - 1; i-- > 0;)
+    v[i] = std::min({vmax, path[i].cap, std::sqrt(v[i + 1] * v[i + 1] + 2.0 * a * (path[i + 1].s - path[i].s))});
+  v[0] = std::min(vmax, start.velocity.norm());
+  for (size_t i = 1; i < n; ++i)
+    v[i] = std::min(v[i], std::sqrt(v[i - 1] * v[i - 1] + 2.0 * a * (path[i].s - path[i - 1].s)));
+  std::vector<double> time(n, 0.0);
+  for (size_t i = 1; i < n; ++i)
+    time[i] = time[i - 1] + 2.0 * (path[i].s - path[i - 1].s) / std::max(v[i] + v[i - 1], 0.1);
+  const double duration = time.back();
+  if (!(duration > 1e-3)) return false;
+  // Positions at equal times.
+  const double interval = duration / segments;
+  std::vector<Eigen::Vector3d> points{start.position};
+  size_t i = 1;
+  for (int k = 1; k <= segments; ++k) {
+    const double t = std::min(duration, k * interval);
+    while (i + 1 < n && time[i] < t) ++i;
+    const double span = time[i] - time[i - 1];
+    const double f = span > 0.0 ? std::clamp((t - time[i - 1]) / span, 0.0, 1.0) : 1.0;
+    points.push_back(path[i - 1].p + f * (path[i].p - path[i - 1].p));
+  }
+  points.back() = path.back().p;
+  // Arriving no faster than the reference, and no faster than the pass allows from this start.
+  const Eigen::Vector3d ref_velocity = ref.velocity(t_g);
+  if (ref_velocity.norm() > 1e-6 && v[n - 1] < ref_velocity.norm() - 1e-3) {
+    *goal_velocity = ref_velocity * (v[n - 1] / ref_velocity.norm());
+    goal_acceleration->setZero();
+  } else {
+    *goal_velocity = ref_velocity;
+    *goal_acceleration = ref.acceleration(t_g);
+  }
+  return UniformBspline::fitToPoints(points, interval, start.velocity, start.acceleration, *goal_velocity,
+                                     *goal_acceleration, 3, out);
 }
 
 std::optional<UniformBspline> TopoReplanner::initialAlong(const LocalProblem& lp, const Path& guide) const {

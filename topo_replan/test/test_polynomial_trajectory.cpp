@@ -120,5 +120,54 @@ TEST(ReferenceTrajectory, StartBeyondTheLimitsTerminates) {
   EXPECT_LE(ref.maxAcceleration(), 2.4 * (1 + 1e-6));
 }
 
+// Profile timing: the reference keeps the limits and, on a route with corners, flies its straight
+// parts faster than with the segments stretched all alike.
+TEST(ReferenceTrajectory, ProfileTimingStretchesOnlyWhereTheLimitsAreBroken) {
+  // A route with a sharp corner in the middle of long straight legs.
+  const std::vector<Eigen::Vector3d> w{{0, 0, 1}, {12, 0, 1}, {12.5, 1.5, 1}, {24, 2, 1}};
+  ReferenceConfig uniform;
+  uniform.max_vel_mps = 5.0;
+  uniform.max_acc_mps2 = 2.5;
+  uniform.max_segment_length_m = 3.0;
+  uniform.cruise_timing = true;
+  ReferenceConfig profile = uniform;
+  profile.profile_timing = true;
+  PolynomialTrajectory a, b;
+  ASSERT_EQ(referenceTrajectory(w, FlatState::atRest(w.front()), FlatState::atRest(w.back()), uniform, &a), TrajectoryStatus::kSuccess);
+  ASSERT_EQ(referenceTrajectory(w, FlatState::atRest(w.front()), FlatState::atRest(w.back()), profile, &b), TrajectoryStatus::kSuccess);
+  for (const PolynomialTrajectory* t : {&a, &b}) {
+    EXPECT_LE(t->maxSpeed(), 5.0 * (1 + 1e-6));
+    EXPECT_LE(t->maxAcceleration(), 2.5 * (1 + 1e-6));
+  }
+  EXPECT_LT(b.duration(), a.duration()) << "profile " << b.duration() << " s, uniform " << a.duration() << " s";
+  EXPECT_GT(b.maxSpeed(), 4.0);
+}
+
+// A closed-loop flight at 5 m/s rebuilt this reference at rest: the segments stretched one by one
+// pushed the excess into their neighbours and the stretching ran away (2e12 s for 30 m; every loop
+// of the replanner over it then hung). Now it is a few times the profile's time, or refused.
+TEST(ReferenceTrajectory, ProfileTimingDoesNotRunAway) {
+  const std::vector<Eigen::Vector3d> w{{3.56039, 3.22677, 0.641217}, {0.998316, 2.83141, 0.642974}, {-1.56376, 2.43606, 0.64473},
+                                       {-4.12584, 2.04071, 0.646487}, {-6.68792, 1.64535, 0.648243}, {-9.25, 1.25, 0.65},
+                                       {-11.15, 1.75, 0.65}, {-13.075, 0.835, 0.95}, {-15, -0.08, 1.25}};
+  ReferenceConfig c;
+  c.max_vel_mps = 5.0;
+  c.max_acc_mps2 = 2.5;
+  c.profile_timing = true;
+  PolynomialTrajectory ref;
+  ASSERT_EQ(referenceTrajectory(w, FlatState::atRest(w.front()), FlatState::atRest(w.back()), c, &ref), TrajectoryStatus::kSuccess);
+  EXPECT_LT(ref.duration(), 20.0);
+  EXPECT_LE(ref.maxAcceleration(), 2.5 * (1 + 1e-6));
+  // From a moving start against the way (a goal behind the vehicle): still bounded.
+  FlatState back = FlatState::atRest(w.front());
+  back.velocity = Eigen::Vector3d(1.5, 0.3, 0.0);
+  const TrajectoryStatus s = referenceTrajectory(w, back, FlatState::atRest(w.back()), c, &ref);
+  if (s == TrajectoryStatus::kSuccess) {
+    EXPECT_LT(ref.duration(), kMaxReferenceStretch * 20.0 + 10.0);
+  } else {
+    EXPECT_EQ(s, TrajectoryStatus::kInfeasible);
+  }
+}
+
 }  // namespace
 }  // namespace topo_planner

@@ -66,6 +66,7 @@ void readFsmParams(Reader& r, ReplanFsm::Config* fsm, double* reference_speed_ra
   r.read("fsm/backoff_speed_mps", f.backoff_speed_mps);
   r.read("fsm/max_backoffs", f.max_backoffs);
   r.read("fsm/max_look_holds", f.max_look_holds);
+  r.read("fsm/look_hold_min_s", f.look_hold_min_s);
   r.read("fsm/mission_timeout_s", f.mission_timeout_s);
   r.read("fsm/progress_timeout_s", f.progress_timeout_s);
   r.read("fsm/progress_min_gain_m", f.progress_min_gain_m);
@@ -99,14 +100,20 @@ void readFsmParams(Reader& r, ReplanFsm::Config* fsm, double* reference_speed_ra
   r.read("fsm/brake_acc_mps2", f.brake_acc_mps2);
   f.max_brake_acc_mps2 = std::max(f.max_brake_acc_mps2, f.brake_acc_mps2);
   r.read("fsm/max_brake_acc_mps2", f.max_brake_acc_mps2);
+  f.commit_brake_acc_mps2 = f.max_brake_acc_mps2;
+  r.read("fsm/commit_brake_acc_mps2", f.commit_brake_acc_mps2);
 
   TopoReplanner::Config& p = f.replanner;
   p.local_goal_margin_m = 2.0;  // 1 m failed 44 of 344 moving-start replans, 2 m 4 (README)
   r.read("replan/horizon_m", p.horizon_m);
+  p.horizon_time_s = 3.0;
+  r.read("replan/horizon_time_s", p.horizon_time_s);
   r.read("replan/reference_clearance_m", p.reference_clearance_m);
   r.read("replan/local_goal_margin_m", p.local_goal_margin_m);
   r.read("replan/max_local_goal_extension_m", p.max_local_goal_extension_m);
   r.read("replan/control_point_spacing_m", p.control_point_spacing_m);
+  p.profile_timing = true;
+  r.read("replan/profile_timing", p.profile_timing);
   r.read("replan/guide_timing_ratio", p.guide_timing_ratio);
   r.read("replan/max_search_start_offset_m", p.max_search_start_offset_m);
   r.read("replan/min_start_clearance_m", p.min_start_clearance_m);

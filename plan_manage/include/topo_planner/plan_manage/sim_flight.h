@@ -54,6 +54,8 @@ class SimFlight {
     SpeedAccount::Config speed;        ///< the flight's limits (keep them the planner's)
     FlightOracle::Config oracle;       ///< idem, and the route's clearance and band
     bool compute_oracle = true;
+    /// Called after every planning call (ReplanFsm::setPlanObserver): diagnostics, e.g. saving problems.
+    ReplanFsm::PlanObserver plan_observer;
 
     static Eigen::Isometry3d defaultBodyToCamera();
     bool validate(std::string* why) const;

@@ -97,6 +97,10 @@ struct ReferenceConfig {
   bool profile_timing = false;
 };
 
+/// referenceTrajectory() refuses (kInfeasible) a trajectory stretched longer than this times its first
+/// segment times (plus 10 s): no plan to fly, and a loop over its length would take forever.
+constexpr double kMaxReferenceStretch = 20.0;
+
 /// Minimum-snap trajectory through waypoints, segment times from a trapezoidal speed profile per
 /// segment (or, with profile_timing, from the time-optimal profile along the path), then times
 /// stretched until the speed and acceleration limits hold (sampled): all of them, or with

@@ -122,6 +122,7 @@
 
 #include "topo_planner/path_searching/global_router.h"
 #include "topo_planner/plan_env/grid_geometry.h"
+#include "topo_planner/topo_replan/known_space_commitment.h"
 #include "topo_planner/topo_replan/mission_progress.h"
 #include "topo_planner/topo_replan/topo_replanner.h"
 
@@ -272,6 +273,10 @@ class ReplanFsm {
     /// unobserved space by this much each [m].
     double known_start_radius_m = 0.3;
     double commit_margin_m = 0.1;       ///< the committed stop ends this far before unknown space [m]
+    /// The deceleration of the committed stop (the back-up every published plan keeps): how late a
+    /// plan may start stopping before unknown space. Up to max_brake_acc_mps2, the vehicle's limit;
+    /// it is flown only when no new plan takes over in time [m/s^2].
+    double commit_brake_acc_mps2 = 2.5;
 
     // Input liveness (see the class comment).
     double depth_timeout_s = 0.5;       ///< depth older than this is stale; 0: depth is not required [s]
@@ -303,6 +308,9 @@ class ReplanFsm {
     /// Plans cut to a hold at the same place (unknown space right ahead that turning to look does not
     /// reveal) this many times in a row: back off along the flown path, where the camera sees more.
     int max_look_holds = 5;
+    /// ... and held there for at least this long: time for the camera to turn round (pi at the
+    /// trajectory server's yaw rate) and see where the plan goes [s].
+    double look_hold_min_s = 2.5;
     /// A mission with no successful plan for this long (since it started or since its last one) is
     /// given up [s]; 0: 60 s or 4 times the duration of its first reference, whichever is longer.
     double mission_timeout_s = 0.0;
@@ -379,6 +387,8 @@ class ReplanFsm {
   /// ticking.
   /// The replanner's config the FSM plans with: config.replanner within the route's height band.
   static TopoReplanner::Config replannerConfig(const Config& config);
+  /// The known-space commitment's settings of a config (its clearance, margin, back-up deceleration, band).
+  static KnownSpaceCommitment::Config commitmentConfig(const Config& config);
   using PlanObserver = std::function<void(const EsdfMap&, const ReplanRequest&, const ReplanResult&)>;
   void setPlanObserver(PlanObserver observer) { plan_observer_ = std::move(observer); }
   /// The safety thread: checks the executing trajectory from t; flags a replan when it collides,
@@ -425,15 +435,7 @@ class ReplanFsm {
   /// With `from`, the stop starts from that state instead, along its velocity (odometry jump).
   ExecTrajectory brakingTrajectory(double t, const EsdfMap& map, std::string* report,
                                    const FlatState* from = nullptr) const;
-  /// A point of `map` the committed part of a trajectory may cross: observed free (all 8 voxels
-  /// around it), at least safety_clearance_m from obstacles, and every voxel within
-  /// safety_clearance_m of it observed (or within known_start_radius_m + safety_clearance_m of the
-  /// known anchor); or within known_start_radius_m of the known anchor (known_anchor_).
-  /// And not farther out of the height band (route.min_z_m, max_z_m) than start_excess.
-  bool committable(const EsdfMap& map, const Eigen::Vector3d& p, double start_excess) const;
-  /// How far z lies outside the height band [m]; 0 inside.
-  double bandExcess(double z) const;
-  /// The known-space commitment of a plan starting at t0 (see the class comment): fills traj->spline,
+  /// The known-space commitment of a plan starting at t0 (KnownSpaceCommitment): fills traj->spline,
   /// brake_start_s, stops_before_unknown and the heading target; false (with why) when the cut
   /// trajectory cannot be built or fails its check.
   bool commitToKnownSpace(const UniformBspline& plan, double t0, const EsdfMap& map, ExecTrajectory* traj,
@@ -554,6 +556,7 @@ class ReplanFsm {
   // space either; the anchor moves there once the vehicle is at rest.
   bool anchor_at_rest_ = false;
   Eigen::Vector3d look_hold_position_ = Eigen::Vector3d::Zero();
+  double look_hold_since_s_ = 0.0;        // the first hold at look_hold_position_ [s]
   bool new_mission_ = false;              // set by setGoals: the next started reference begins a mission
   double last_progress_s_ = 0.0;          // the mission's start or its last successful plan (not a hold) [s]
   uint64_t route_epoch_ = 0;              // bumped by setGoals, stops and odometry jumps: a route searched before is stale

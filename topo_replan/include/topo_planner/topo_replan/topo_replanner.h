@@ -156,7 +156,9 @@ class TopoReplanner {
     TopoPathSearch::Config search;        ///< guide paths (Sect. IV)
     PathGuidedOptimizer::Config optimizer;  ///< PGO (Sect. III); its clearance_m is the final check's
     GridAStar::Config astar;              ///< last-resort guide (no topological path, or none passed)
-    double horizon_m = 7.0;               ///< length of reference checked and replanned [m]
+    double horizon_m = 7.0;               ///< length of reference checked and replanned [m] ...
+    /// ... or, when longer, this long of flight at the start's speed [s]; 0: horizon_m alone.
+    double horizon_time_s = 0.0;
     double reference_clearance_m = 0.3;   ///< the reference collides where the ESDF is below this [m]
     /// When the reference collides at the horizon, the local goal is the first reference point past
     /// it that is followed by this much collision-free reference (not just the first free point:
@@ -168,6 +170,13 @@ class TopoReplanner {
     double max_local_goal_extension_m = 5.0;
     double reference_sample_s = 0.01;     ///< time step of the reference check, at least 1e-4 [s]
     double control_point_spacing_m = 0.35;  ///< initial spline: about one control point per this [m]
+    /// The initial spline's timing. false: the reference's own (the paper's: the local segment is the
+    /// reference between the two times). true: along the same path, the fastest speed within the
+    /// reference's own speed at each point, from the start's speed at the optimiser's acceleration
+    /// (feasibility_margin of it): a vehicle slower than the reference's timing (it started late, it
+    /// slowed for an obstacle) is not asked to catch up with it, which asked for 22-220 m/s^2 at the
+    /// start and stretched every candidate (time ratios of 1.3-1.6 at 5 m/s in the open).
+    bool profile_timing = false;
     /// A guide path longer than this times the reference segment whose candidate failed from the
     /// segment's timing is optimised again from an initial spline along the guide, timed for its
     /// length (initialAlong).
@@ -220,6 +229,13 @@ class TopoReplanner {
   /// `time_ratio`: the stretch of the reallocation (1: none).
   bool repairStart(const FlatState& start, const EsdfMap& map, double time_ratio, UniformBspline* trajectory,
                    std::string* why) const;
+  /// The initial spline of profile_timing: the reference's path from the start to its time t_g,
+  /// timed from the start's speed (see Config::profile_timing), fitted with
+  /// `segments` knot intervals; the goal's velocity and acceleration (the reference's, scaled down
+  /// when the profile arrives slower) are returned too. False when it cannot be timed or fitted.
+  bool profileTimedSegment(const PolynomialTrajectory& ref, const FlatState& start, double t0, double t_g, int segments,
+                           Eigen::Vector3d* goal_velocity, Eigen::Vector3d* goal_acceleration,
+                           UniformBspline* out) const;
   /// An initial spline along `guide`, timed for its length, when the guide is longer than
   /// guide_timing_ratio times the reference segment (a candidate that failed from the segment's
   /// timing is optimised again from it); nullopt otherwise.
