@@ -7,7 +7,7 @@ CATKIN_ARGS := -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCMAKE_BUILD_TYPE=Release
 BIN = $(1)/devel/lib/topo_planner
 COMMA := ,
 
-.PHONY: deps build test bench bench-env bench-topo bench-opt bench-replan bench-forest-gen bench-camera bench-flight bench-flight-forests bench-faults soak demo map-demo test-asan test-tsan test-sanitizers fuzz clean
+.PHONY: deps build test bench bench-env bench-topo bench-opt bench-replan bench-forest-gen bench-camera bench-flight bench-flight-forests bench-speed bench-speed-core bench-faults soak demo map-demo test-asan test-tsan test-sanitizers fuzz clean
 
 deps:
 	@bash scripts/install_deps.sh
@@ -83,6 +83,20 @@ bench-flight: build
 bench-flight-forests: build
 	@mkdir -p results/forests
 	WS=$(WS) /usr/bin/python3 scripts/bench_flight.py --suite forests --out $(ROOT)/results/forests $(BENCH_ARGS)
+
+# Speed (scripts/bench_speed.py): closed-loop flights over the six world styles x ideal and realistic sensing
+# x max_vel 3, 5 and 7 (bench-flight's worlds and goals), headless: per group goals, collisions, clearance, mean
+# speed, time above 0.8 max_vel, the speed account and mission time / oracle time; results/bench_speed.md,
+# results/bench_speed_speeds.png and a RESULT line. About an hour and a half; not in CI.
+# bench-speed-core: the same worlds in the ROS-free closed loop (plan_manage/sim_flight.h, simulated time,
+# seconds per flight): results/speed_core/bench_speed_core.md and a RESULT line.
+bench-speed: build
+	@mkdir -p results
+	WS=$(WS) /usr/bin/python3 scripts/bench_speed.py --out $(ROOT)/results $(BENCH_ARGS)
+
+bench-speed-core: build
+	@mkdir -p results/speed_core
+	WS=$(WS) /usr/bin/python3 scripts/bench_speed_core.py --out $(ROOT)/results/speed_core $(BENCH_ARGS)
 
 # Fault injection (scripts/bench_faults.py): 20 seeded closed-loop flights in simulated time, each with
 # a random schedule of faults (camera or odometry blackout, odometry jump, ROS time step, planner kill),

@@ -17,6 +17,7 @@ bool GlobalRouter::Config::validate(std::string* why) const {
     return bad("route preferred_clearance_m must be finite and > 0");
   if (!(clearance_weight >= 0.0) || !std::isfinite(clearance_weight)) return bad("route clearance_weight must be >= 0");
   if (!(avoid_weight >= 0.0) || !std::isfinite(avoid_weight)) return bad("route avoid_weight must be >= 0");
+  if (!(unknown_weight >= 0.0) || !std::isfinite(unknown_weight)) return bad("route unknown_weight must be >= 0");
   if (!(heuristic_weight >= 1.0) || !std::isfinite(heuristic_weight)) return bad("route heuristic_weight must be >= 1");
   if (!(min_z_m < max_z_m)) return bad("route min_z_m must be below max_z_m");
   if (!(band_margin_m >= 0.0) || !std::isfinite(band_margin_m)) return bad("route band_margin_m must be finite and >= 0");
@@ -68,6 +69,7 @@ GlobalRouter::Result GlobalRouter::search(const EsdfMap& map, const Eigen::Vecto
     parent_.resize(volume);
     cell_distance_.resize(volume);
     cell_best_.resize(volume);
+    cell_unknown_.resize(volume);
     generation_ = 0;
   }
   if (++generation_ >= 0x7fffffffu) {  // the top bit marks closed cells
@@ -107,6 +109,7 @@ GlobalRouter::Result GlobalRouter::search(const EsdfMap& map, const Eigen::Vecto
       cell_stamp_[a] = generation_;
       cell_distance_[a] = best;
       cell_best_[a] = best_offset;
+      cell_unknown_[a] = best >= 0.0f && occupancy.state(voxelOf(c, best_offset)) == VoxelState::kUnknown;
     }
     return cell_distance_[a];
   };
@@ -202,6 +205,7 @@ GlobalRouter::Result GlobalRouter::search(const EsdfMap& map, const Eigen::Vecto
           if (a == ae) pn = goal;
           double penalty = 1.0 + w * std::max(0.0, pref - double(dn)) / pref;
           if (!avoided_.empty()) penalty *= avoidance(pn);
+          if (cell_unknown_[a]) penalty *= 1.0 + config_.unknown_weight;
           const float cost = gc + float((pn - pc).norm() * penalty);
           if (stamp_[a] == generation_ && g_[a] <= cost) continue;
           stamp_[a] = generation_;
@@ -215,14 +219,32 @@ GlobalRouter::Result GlobalRouter::search(const EsdfMap& map, const Eigen::Vecto
     return result;
   }
 
-  // The raw route: start, the best voxel of every cell between, goal.
+  // The raw route: start, the best voxel of every cell between, goal; and which are unknown.
   std::vector<size_t> cells;
   for (int64_t a = int64_t(ae); a >= 0; a = parent_[size_t(a)]) cells.push_back(size_t(a));
   std::reverse(cells.begin(), cells.end());
   Path& raw = result.raw;
+  std::vector<uint8_t> raw_unknown;
   raw.push_back(start);
-  for (size_t i = 1; i + 1 < cells.size(); ++i) raw.push_back(geo.centerOf(voxelOf(cellAt(cells[i]), cell_best_[cells[i]])));
+  raw_unknown.push_back(0);
+  for (size_t i = 1; i + 1 < cells.size(); ++i) {
+    raw.push_back(geo.centerOf(voxelOf(cellAt(cells[i]), cell_best_[cells[i]])));
+    raw_unknown.push_back(cell_unknown_[cells[i]]);
+  }
   raw.push_back(goal);
+  raw_unknown.push_back(0);
+  // A shortcut through unknown space where the raw route between its ends went through known space
+  // only would undo the preference for the known way.
+  auto crossesUnknown = [&](size_t i, size_t j) {
+    if (!(config_.unknown_weight > 0.0) || !config_.unknown_is_free) return false;
+    for (size_t m = i + 1; m < j; ++m)
+      if (raw_unknown[m]) return false;
+    const Eigen::Vector3d ab = raw[j] - raw[i];
+    const int steps = std::max(1, int(std::ceil(ab.norm() / (0.5 * geo.resolution()))));
+    for (int s = 1; s < steps; ++s)
+      if (occupancy.state(Eigen::Vector3d(raw[i] + ab * (double(s) / steps))) == VoxelState::kUnknown) return true;
+    return false;
+  };
 
   // Shortening by line of sight at the clearance: from each kept point, the farthest raw point
   // visible (looking shortcut_lookahead points past the last visible one); a raw step where none is.
@@ -233,7 +255,8 @@ GlobalRouter::Result GlobalRouter::search(const EsdfMap& map, const Eigen::Vecto
   while (anchor + 1 < raw.size()) {
     size_t best = anchor + 1;
     for (size_t j = anchor + 2; j < raw.size() && j <= best + size_t(config_.shortcut_lookahead); ++j)
-      if (checker.lineVisible(raw[anchor], raw[j]) && !crossesZone(raw[anchor], raw[j])) best = j;
+      if (checker.lineVisible(raw[anchor], raw[j]) && !crossesZone(raw[anchor], raw[j]) && !crossesUnknown(anchor, j))
+        best = j;
     path.push_back(raw[best]);
     anchor = best;
   }

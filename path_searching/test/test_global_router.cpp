@@ -285,3 +285,56 @@ TEST(GlobalRouter, RefusesBadInputAndStopsAtItsBudget) {
 
 }  // namespace
 }  // namespace topo_planner
+
+namespace topo_planner {
+namespace {
+
+// The way back of a mission across a wall: the window it came through (4 m aside of the straight
+// line) is known free, the rest of the wall's face unseen. With unknown space weighed, the route
+// goes back through the known window; without, straight through the unseen wall, which the vehicle
+// then finds closed when it gets there (at 4-5 m/s the way back timed out, failing wall after wall).
+// An unknown way much shorter than the known one is still taken.
+TEST(GlobalRouter, AKnownWindowIsPreferredToAnUnknownShortcut) {
+  auto scene = [](double seen_until_y) {
+    SyntheticScene s(Eigen::Vector3d(24.0, 16.0, 3.0));
+    s.fill([](const Eigen::Vector3d& p) {
+      return p.x() >= 11.9 && p.x() <= 12.1 && !(std::abs(p.y() - 12.0) <= 0.6 && std::abs(p.z() - 1.5) <= 0.6);
+    });
+    // Unknown: both sides of the wall except a corridor to and through the window.
+    s.fill([=](const Eigen::Vector3d& p) { return p.x() > 6.0 && p.x() < 18.0 && p.y() < seen_until_y; },
+           VoxelState::kUnknown);
+    return s;
+  };
+  const Eigen::Vector3d start(20, 8, 1.5), goal(2, 8, 1.5), window(12, 12, 1.5);
+  auto crossesAtWindow = [&](const Path& path) {
+    for (const Eigen::Vector3d& p : resamplePath(path, 0.05))
+      if (std::abs(p.x() - 12.0) < 0.06) return std::abs(p.y() - 12.0) < 0.6;
+    return false;
+  };
+  SyntheticScene s = scene(10.5);
+  const EsdfMap& map = s.finish();
+  GlobalRouter::Config c;
+  c.unknown_weight = 0.0;
+  GlobalRouter plain(c);
+  const GlobalRouter::Result straight = plain.route(map, start, goal);
+  ASSERT_EQ(straight.status, SearchStatus::kSuccess);
+  EXPECT_FALSE(crossesAtWindow(straight.path)) << "unknown as good as known: through the unseen wall";
+  c.unknown_weight = 1.0;
+  GlobalRouter weighed(c);
+  const GlobalRouter::Result known = weighed.route(map, start, goal);
+  ASSERT_EQ(known.status, SearchStatus::kSuccess);
+  EXPECT_TRUE(crossesAtWindow(known.path)) << "through the window seen on the way out";
+  // The shortening keeps it there: no shortcut from the window's corridor through unknown space.
+  EXPECT_LT(known.length_m, 1.25 * ((window - start).norm() + (goal - window).norm()));
+  // An unknown way much shorter: the window far aside (a detour of over twice the way) is not taken.
+  const Eigen::Vector3d near_start(14, 2, 1.5), near_goal(10, 2, 1.5);
+  const GlobalRouter::Result shortcut = weighed.route(map, near_start, near_goal);
+  ASSERT_EQ(shortcut.status, SearchStatus::kSuccess);
+  EXPECT_FALSE(crossesAtWindow(shortcut.path));
+  c.unknown_weight = -1.0;
+  std::string why;
+  EXPECT_FALSE(c.validate(&why));
+}
+
+}  // namespace
+}  // namespace topo_planner

@@ -121,65 +121,13 @@ int main(int argc, char** argv) {
   if ((map_file.empty() == forest.empty()) || goals.empty()) return usage("give --map or --forest, and --goals");
   if (sensing != "ideal" && sensing != "realistic") return usage("--sensing is ideal or realistic");
 
-  // The planner as the node configures it (config/planner.yaml), at the flight's limits.
+  // The planner, mapping, camera and trajectory server as configured in config/*.yaml.
   std::string why;
-  std::optional<YamlParams> planner = YamlParams::load(config_dir + "/planner.yaml", &why);
-  if (!planner) return usage(why);
   SimFlight::Config c;
-  double ratio = 0.75;
-  readFsmParams(*planner, &c.fsm, &ratio);
-  setFlightLimits(max_vel, max_acc, ratio, &c.fsm);
-  c.fsm.brake_acc_mps2 = std::min(c.fsm.brake_acc_mps2, max_acc);
-  c.fsm.replanner.search.roadmap.max_time_s = 0.0;  // budgets by count: deterministic
-  c.fsm.replanner.optimizer.max_time_s = 0.0;
-  if (!planner->errors().str().empty()) return usage("config/planner.yaml: " + planner->errors().str());
-  // The mapping (config/mapping.yaml) in the flight's window; the camera (config/depth_camera.yaml).
-  std::optional<YamlParams> mapping = YamlParams::load(config_dir + "/mapping.yaml", &why);
-  std::optional<YamlParams> camera = YamlParams::load(config_dir + "/depth_camera.yaml", &why);
-  std::optional<YamlParams> server = YamlParams::load(config_dir + "/traj_server.yaml", &why);
-  if (!mapping || !camera || !server) return usage(why);
-  mapping->read("map/resolution_m", c.map.resolution_m);
-  mapping->read("map/prob_hit", c.map.prob_hit);
-  mapping->read("map/prob_miss", c.map.prob_miss);
-  mapping->read("map/prob_min", c.map.prob_min);
-  mapping->read("map/prob_max", c.map.prob_max);
-  mapping->read("map/prob_occupied", c.map.prob_occupied);
-  mapping->read("map/min_ray_length_m", c.map.min_ray_length_m);
-  mapping->read("map/max_ray_length_m", c.map.max_ray_length_m);
-  mapping->read("map/depth_pixel_skip", c.map.depth_pixel_skip);
-  mapping->read("map/merge_rays", c.map.merge_rays);
-  mapping->read("esdf/max_distance_m", c.esdf.max_distance_m);
-  mapping->read("esdf/inflate_radius_m", c.esdf.inflate_radius_m);
-  mapping->read("esdf/num_threads", c.esdf.num_threads);
+  if (!loadSimFlightConfig(config_dir, max_vel, max_acc, sensing == "realistic", &c, &why)) return usage(why);
+  c.goal_timeout_s = goal_timeout;
   c.map.origin_m = Eigen::Vector3d(window[0], window[1], window[2]);
   c.map.size_m = Eigen::Vector3d(window[3], window[4], window[5]);
-  camera->read("camera/width", c.camera.camera.width);
-  camera->read("camera/height", c.camera.camera.height);
-  camera->read("camera/fx", c.camera.camera.fx);
-  camera->read("camera/fy", c.camera.camera.fy);
-  camera->read("camera/cx", c.camera.camera.cx);
-  camera->read("camera/cy", c.camera.camera.cy);
-  camera->read("min_range_m", c.camera.min_range_m);
-  camera->read("max_range_m", c.camera.max_range_m);
-  camera->read("rate_hz", c.camera_rate_hz);
-  if (sensing == "realistic") {  // launch/simulator.launch's depth noise and holes
-    c.camera.noise_stddev_at_1m = 0.005;
-    c.camera.invalid_fraction = 0.05;
-  }
-  server->read("max_yaw_rate_radps", c.server.max_yaw_rate_radps);
-  server->read("yaw_lookahead_s", c.server.lookahead_s);
-  server->read("yaw_min_displacement_m", c.server.min_displacement_m);
-  server->read("heartbeat_timeout_s", c.server.heartbeat_timeout_s);
-  server->read("stop_acc_mps2", c.server.stop_acc_mps2);
-  server->read("stop_jerk_mps3", c.server.stop_jerk_mps3);
-  server->read("max_takeover_gap_m", c.server.max_takeover_gap_m);
-  server->read("max_takeover_velocity_gap_mps", c.server.max_takeover_velocity_gap_mps);
-  c.goal_timeout_s = goal_timeout;
-  c.speed.max_vel_mps = c.oracle.max_vel_mps = max_vel;
-  c.speed.max_acc_mps2 = c.oracle.max_acc_mps2 = max_acc;
-  c.oracle.clearance_m = c.fsm.replanner.search.clearance_m;
-  c.oracle.min_z_m = c.fsm.route.min_z_m;
-  c.oracle.max_z_m = c.fsm.route.max_z_m;
 
   std::vector<Eigen::Vector3d> points;
   if (!worldPoints(map_file, forest, start, goals, &points, &why)) return usage(why);

@@ -154,6 +154,14 @@ bool readFlightMonitorParams(const ros::NodeHandle& pnh, FlightMonitor::Config* 
   r.read("oracle/clearance_m", c.oracle.clearance_m);
   r.read("oracle/min_z_m", c.oracle.min_z_m);
   r.read("oracle/max_z_m", c.oracle.max_z_m);
+  std::vector<double> window;
+  r.read("oracle/window_m", window);  // the planner's map window: origin x y z, size x y z
+  if (window.size() == 6) {
+    c.oracle_window_origin_m = Eigen::Vector3d(window[0], window[1], window[2]);
+    c.oracle_window_size_m = Eigen::Vector3d(window[3], window[4], window[5]);
+  } else if (!window.empty()) {
+    r.errors() << "oracle/window_m must hold 6 numbers (origin x y z, size x y z); ";
+  }
   r.read("setpoint_jump_margin_m", rc.setpoints.jump_margin_m);
   r.read("reanchor_tolerance_m", rc.setpoints.reanchor_tolerance_m);
   r.read("reanchor_window_s", rc.setpoints.reanchor_window_s);
@@ -504,7 +512,12 @@ void FlightMonitor::computeOracle() {
   const Eigen::Vector3d start = have_truth_position_ ? truth_position_ : config_.start_m;
   if (!truth_ || !start.allFinite()) return;
   const auto t0 = std::chrono::steady_clock::now();
-  const FlightOracle::Result oracle = FlightOracle::compute(truth_->esdf(), start, config_.goals, config_.oracle);
+  // In the planner's window when known (the true map reaches beyond it), else on the whole true map.
+  const FlightOracle::Result oracle =
+      config_.oracle_window_size_m.allFinite() && (config_.oracle_window_size_m.array() > 0.0).all()
+          ? FlightOracle::computeInWindow(truth_->occupancy(), config_.oracle_window_origin_m, config_.oracle_window_size_m,
+                                          start, config_.goals, config_.oracle)
+          : FlightOracle::compute(truth_->esdf(), start, config_.goals, config_.oracle);
   const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   if (!oracle.ok) {
     ROS_WARN("flight_monitor: no oracle time for this flight: %s", oracle.why.c_str());

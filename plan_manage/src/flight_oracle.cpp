@@ -94,4 +94,39 @@ FlightOracle::Result FlightOracle::compute(const EsdfMap& truth, const Eigen::Ve
   return r;
 }
 
+FlightOracle::Result FlightOracle::computeInWindow(const OccupancyMap& truth, const Eigen::Vector3d& window_origin_m,
+                                                   const Eigen::Vector3d& window_size_m, const Eigen::Vector3d& start,
+                                                   const std::vector<Eigen::Vector3d>& goals, const Config& config) {
+  Result r;
+  OccupancyMap::Config mc;
+  mc.resolution_m = truth.geometry().resolution();
+  mc.origin_m = window_origin_m;
+  mc.size_m = window_size_m;
+  std::string why;
+  std::shared_ptr<OccupancyMap> map(OccupancyMap::create(mc, &why));
+  if (!map) {
+    r.why = "oracle window: " + why;
+    return r;
+  }
+  const GridGeometry& g = map->geometry();
+  const VoxelBox box = g.windowBox();
+  Eigen::Vector3i i;
+  for (i.z() = box.min.z(); i.z() <= box.max.z(); ++i.z())
+    for (i.y() = box.min.y(); i.y() <= box.max.y(); ++i.y())
+      for (i.x() = box.min.x(); i.x() <= box.max.x(); ++i.x()) map->setState(i, VoxelState::kFree);
+  truth.forEachOccupied([&](const Eigen::Vector3i& j) {
+    const Eigen::Vector3d p = truth.geometry().centerOf(j);
+    if (g.inWindow(p)) map->setState(g.indexOf(p), VoxelState::kOccupied);
+  });
+  EsdfMap::Config ec;
+  ec.max_distance_m = 2.0;
+  std::unique_ptr<EsdfMap> esdf = EsdfMap::create(ec, map, &why);
+  if (!esdf) {
+    r.why = "oracle window: " + why;
+    return r;
+  }
+  esdf->updateAll();
+  return compute(*esdf, start, goals, config);
+}
+
 }  // namespace topo_planner

@@ -7,6 +7,9 @@
 #include <memory>
 #include <sstream>
 
+#include "topo_planner/plan_manage/planner_params.h"
+#include "topo_planner/plan_manage/yaml_params.h"
+
 namespace topo_planner {
 
 Eigen::Isometry3d SimFlight::Config::defaultBodyToCamera() {
@@ -97,7 +100,8 @@ SimFlight::Result SimFlight::fly(const TruthMap& truth, const Eigen::Vector3d& s
   r.goals.resize(goals.size());
   for (size_t i = 0; i < goals.size(); ++i) r.goals[i].position = goals[i];
   if (config.compute_oracle) {
-    const FlightOracle::Result oracle = FlightOracle::compute(truth.esdf(), start, goals, config.oracle);
+    const FlightOracle::Result oracle =
+        FlightOracle::computeInWindow(truth.occupancy(), config.map.origin_m, config.map.size_m, start, goals, config.oracle);
     if (oracle.ok)
       for (size_t i = 0; i < goals.size(); ++i) r.goals[i].oracle_time_s = oracle.time_s[i];
   }
@@ -293,6 +297,70 @@ SimFlight::Result SimFlight::fly(const TruthMap& truth, const Eigen::Vector3d& s
   r.ok = r.goals_reached == int(goals.size()) && r.collisions == 0;
   if (r.message.empty()) r.message = r.ok ? "every goal reached, no contact" : std::to_string(r.collisions) + " contacts";
   return r;
+}
+
+bool loadSimFlightConfig(const std::string& config_dir, double max_vel_mps, double max_acc_mps2, bool realistic,
+                         SimFlight::Config* config, std::string* why) {
+  const double max_vel = max_vel_mps, max_acc = max_acc_mps2;
+  SimFlight::Config& c = *config;
+  std::optional<YamlParams> planner = YamlParams::load(config_dir + "/planner.yaml", why);
+  if (!planner) return false;
+  double ratio = 0.75;
+  readFsmParams(*planner, &c.fsm, &ratio);
+  setFlightLimits(max_vel, max_acc, ratio, &c.fsm);
+  c.fsm.brake_acc_mps2 = std::min(c.fsm.brake_acc_mps2, max_acc);
+  c.fsm.replanner.search.roadmap.max_time_s = 0.0;  // budgets by count: deterministic
+  c.fsm.replanner.optimizer.max_time_s = 0.0;
+  if (!planner->errors().str().empty()) {
+    *why = "config/planner.yaml: " + planner->errors().str();
+    return false;
+  }
+  // The mapping (config/mapping.yaml) in the flight's window; the camera (config/depth_camera.yaml).
+  std::optional<YamlParams> mapping = YamlParams::load(config_dir + "/mapping.yaml", why);
+  std::optional<YamlParams> camera = YamlParams::load(config_dir + "/depth_camera.yaml", why);
+  std::optional<YamlParams> server = YamlParams::load(config_dir + "/traj_server.yaml", why);
+  if (!mapping || !camera || !server) return false;
+  mapping->read("map/resolution_m", c.map.resolution_m);
+  mapping->read("map/prob_hit", c.map.prob_hit);
+  mapping->read("map/prob_miss", c.map.prob_miss);
+  mapping->read("map/prob_min", c.map.prob_min);
+  mapping->read("map/prob_max", c.map.prob_max);
+  mapping->read("map/prob_occupied", c.map.prob_occupied);
+  mapping->read("map/min_ray_length_m", c.map.min_ray_length_m);
+  mapping->read("map/max_ray_length_m", c.map.max_ray_length_m);
+  mapping->read("map/depth_pixel_skip", c.map.depth_pixel_skip);
+  mapping->read("map/merge_rays", c.map.merge_rays);
+  mapping->read("esdf/max_distance_m", c.esdf.max_distance_m);
+  mapping->read("esdf/inflate_radius_m", c.esdf.inflate_radius_m);
+  mapping->read("esdf/num_threads", c.esdf.num_threads);
+  camera->read("camera/width", c.camera.camera.width);
+  camera->read("camera/height", c.camera.camera.height);
+  camera->read("camera/fx", c.camera.camera.fx);
+  camera->read("camera/fy", c.camera.camera.fy);
+  camera->read("camera/cx", c.camera.camera.cx);
+  camera->read("camera/cy", c.camera.camera.cy);
+  camera->read("min_range_m", c.camera.min_range_m);
+  camera->read("max_range_m", c.camera.max_range_m);
+  camera->read("rate_hz", c.camera_rate_hz);
+  if (realistic) {  // launch/simulator.launch's depth noise and holes
+    c.camera.noise_stddev_at_1m = 0.005;
+    c.camera.invalid_fraction = 0.05;
+  }
+  server->read("max_yaw_rate_radps", c.server.max_yaw_rate_radps);
+  server->read("yaw_lookahead_s", c.server.lookahead_s);
+  server->read("yaw_min_displacement_m", c.server.min_displacement_m);
+  server->read("heartbeat_timeout_s", c.server.heartbeat_timeout_s);
+  server->read("stop_acc_mps2", c.server.stop_acc_mps2);
+  server->read("stop_jerk_mps3", c.server.stop_jerk_mps3);
+  server->read("max_takeover_gap_m", c.server.max_takeover_gap_m);
+  server->read("max_takeover_velocity_gap_mps", c.server.max_takeover_velocity_gap_mps);
+  c.speed.max_vel_mps = c.oracle.max_vel_mps = max_vel;
+  c.speed.max_acc_mps2 = c.oracle.max_acc_mps2 = max_acc;
+  c.oracle.clearance_m = c.fsm.replanner.search.clearance_m;
+  c.oracle.min_z_m = c.fsm.route.min_z_m;
+  c.oracle.max_z_m = c.fsm.route.max_z_m;
+
+  return config->validate(why);
 }
 
 std::string formatSimFlight(const SimFlight::Result& r) {

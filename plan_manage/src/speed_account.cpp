@@ -106,6 +106,11 @@ SlowCause SpeedAccount::classify(double t, double speed, bool* fast) const {
   if (cmd_speed < config_.held_speed_mps && a.norm() < config_.held_acc_mps2) return SlowCause::kHeld;
   if (traj && t - traj->start_s <= config_.takeover_window_s) {
     const Trajectory* before = replaced(*traj);
+    // A plan that took over from the committed stop of the one before (its brake point passed
+    // first): the speed it starts from was lost to the commitment.
+    if (before && before->kind == TrajectoryKind::kPlan && before->brake_start_s < traj->start_s - 1e-6 &&
+        before->brake_start_s < before->start_s + before->spline.duration() - 1e-6)
+      return SlowCause::kCommitment;
     if (before && before->kind == TrajectoryKind::kPlan && t < before->brake_start_s) {
       const double would = speedOf(before->spline, t - before->start_s);
       if (would - cmd_speed > config_.takeover_loss_mps) return SlowCause::kTakeover;

@@ -114,6 +114,12 @@ TEST(SpeedAccount, PastTheBrakePointOfACutPlanIsTheCommitment) {
   // Its end, at rest: still the commitment (waiting to see further), not a hold of its own.
   a.setSetpoint(on(1, Eigen::Vector3d::Zero()));
   EXPECT_EQ(classify(a, 14.5, 0.0), SlowCause::kCommitment);
+  // A plan taking over from that committed stop: what it starts from was lost to the commitment,
+  // for the takeover window; then its own pace.
+  a.addTrajectory(plan(3, 13.0, 1.0, 4.0));
+  a.setSetpoint(on(3, Eigen::Vector3d(1.2, 0, 0), Eigen::Vector3d(2.0, 0, 0)));
+  EXPECT_EQ(classify(a, 13.5, 1.2), SlowCause::kCommitment);
+  EXPECT_EQ(classify(a, 14.5, 1.2), SlowCause::kLimits);
   // A plan that was not cut has no brake point: its end at rest is a hold.
   a.addTrajectory(plan(2, 20.0, 1.5, 4.0));
   a.setSetpoint(on(2, Eigen::Vector3d::Zero()));

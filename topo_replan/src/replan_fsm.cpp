@@ -889,6 +889,11 @@ void ReplanFsm::startManoeuvreLocked(ExecTrajectory manoeuvre, bool backoff, Fsm
   setState(FsmState::kEmergencyStop, out, why);
 }
 
+void ReplanFsm::addStallZoneLocked(const GlobalRouter::Zone& zone) {
+  stall_zones_.push_back(zone);
+  if (stall_zones_.size() > kMaxStallZones) stall_zones_.erase(stall_zones_.begin());
+}
+
 bool ReplanFsm::handleStallLocked(double t, const EsdfMap& map, FsmOutput* out) {
   const bool flying = state_ == FsmState::kGenNewTraj || state_ == FsmState::kExecTraj ||
                       state_ == FsmState::kReplanTraj || state_ == FsmState::kEmergencyStop;
@@ -949,7 +954,7 @@ bool ReplanFsm::handleStallLocked(double t, const EsdfMap& map, FsmOutput* out) 
   // The zone lies ahead along the way, where the vehicle was heading (one around the vehicle alone
   // weighs on every way out of it alike).
   if (config_.stall_zone_radius_m > 0.0)
-    stall_zones_.push_back({progress_.ahead(config_.stall_zone_radius_m), config_.stall_zone_radius_m});
+    addStallZoneLocked({progress_.ahead(config_.stall_zone_radius_m), config_.stall_zone_radius_m});
   route_stale_ = true;
   event.message = text;
   if (stalls_ % 2 == 0 && backoffs_ < config_.max_backoffs) {
@@ -1274,7 +1279,8 @@ bool ReplanFsm::startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out) {
     progress_ = MissionProgress(progress);
     stalls_ = 0;
     force_stall_ = false;
-    stall_zones_.clear();
+    // The places stalled at stay weighed by later missions (a return leg through them), the oldest
+    // dropped beyond kMaxStallZones.
     backoff_when_stopped_ = false;
   }
   // The distance left is measured along the way the reference takes; a rebuilt one re-bases it.
@@ -1407,8 +1413,8 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
       // zone lies ahead along the way (where the progress is tracked), else around the hold.
       const bool tracked = config_.progress_timeout_s > 0.0 && progress_.active();
       if (config_.stall_zone_radius_m > 0.0)
-        stall_zones_.push_back({tracked ? progress_.ahead(config_.stall_zone_radius_m) : look_hold_position_,
-                                config_.stall_zone_radius_m});
+        addStallZoneLocked({tracked ? progress_.ahead(config_.stall_zone_radius_m) : look_hold_position_,
+                            config_.stall_zone_radius_m});
       route_stale_ = true;
       event.message += (event.message.empty() ? "" : "; ") + std::string("held at the edge of the known space ") +
                        std::to_string(config_.max_look_holds) + " times; " + backoff_report;
@@ -1733,6 +1739,7 @@ FsmOutput ReplanFsm::checkSafety(double t, const EsdfMap& map) {
     out.odometry_jumped = true;
     anchor_at_rest_ = true;
     flown_.clear();  // in the old frame
+    stall_zones_.clear();
     route_stale_ = true;
     ++route_epoch_;
     return out;

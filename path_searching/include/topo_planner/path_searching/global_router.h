@@ -18,7 +18,8 @@
 //
 // Cost. Edge length times 1 + clearance_weight * max(0, preferred_clearance_m - d) /
 // preferred_clearance_m, d the ESDF of the cell entered: the route keeps to the middle of openings
-// and away from obstacles where there is room, and still passes narrow windows. The heuristic is
+// and away from obstacles where there is room, and still passes narrow windows; times 1 +
+// unknown_weight when the cell entered is unknown space (a known way before an unknown one). The heuristic is
 // heuristic_weight times the Euclidean distance (weighted A*: a route at most that factor longer
 // in cost than the best, found with far fewer expansions).
 //
@@ -62,6 +63,12 @@ class GlobalRouter {
     int max_expansions = 1500000;          ///< budget
     int shortcut_lookahead = 24;           ///< shortening: raw points tried past the last visible one
     double avoid_weight = 4.0;             ///< entering a cell in an avoided zone costs 1 + this times more; >= 0
+    /// Entering a cell whose best voxel is unknown costs 1 + this times more (unknown_is_free only),
+    /// and the shortening takes no shortcut through unknown space between points the route reached
+    /// through known space: a way the camera has seen is preferred unless an unknown one is much
+    /// shorter (a return leg goes back through the window it came through). 0: unknown is as
+    /// good as known; >= 0.
+    double unknown_weight = 0.0;
 
     bool validate(std::string* why) const;
   };
@@ -104,6 +111,7 @@ class GlobalRouter {
   std::vector<uint32_t> cell_stamp_;  // the cell's best voxel was computed in this generation
   std::vector<float> cell_distance_;  // its distance; -1 when the cell has no usable voxel
   std::vector<uint8_t> cell_best_;    // its offset in the cell (x + k (y + k z))
+  std::vector<uint8_t> cell_unknown_; // its best voxel is unknown
   uint32_t generation_ = 0;
 };
 

@@ -89,6 +89,8 @@
 //   speed_account/limit_fraction 0.6   commanded accelerations above this x max_acc are at the limits
 //   oracle/clearance_m         0.3     the oracle's route clearance (the planner's search/clearance_m) [m]
 //   oracle/min_z_m, max_z_m    0.3, 3.0  its height band (the planner's route/min_z_m, max_z_m) [m]
+//   oracle/window_m            []      the planner's map window [ox, oy, oz, sx, sy, sz]: the oracle stays in it
+//                                      (simulation.launch passes map_origin and map_size) [m]
 //   density, seed, max_vel_mps, scenario/<key>   (any scalar) copied into the report's "scenario"
 //
 // Speed (the speed account and the oracle): path length, mean and max speed are measured on the
@@ -133,6 +135,9 @@ class FlightMonitor {
     FlightRecorder::Config recorder;     ///< goal tolerance, timeout, contact check, trace rate
     TruthMap::Config truth;              ///< resolution, window and ESDF of the true map
     FlightOracle::Config oracle;         ///< the oracle's limits, clearance and height band
+    /// The planner's map window (the oracle stays in it); NaN: the whole true map [m].
+    Eigen::Vector3d oracle_window_origin_m = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
+    Eigen::Vector3d oracle_window_size_m = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
     double clearance_exact_within_m = 1.0;  ///< clearances below this are exact [m]
     double ground_z_m = 0.0;             ///< height of the ground plane, an obstacle too [m]
     std::vector<Eigen::Vector3d> goals;  ///< the goal sequence [m]

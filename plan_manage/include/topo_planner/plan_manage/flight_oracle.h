@@ -46,6 +46,13 @@ class FlightOracle {
   /// The oracle's legs from `start` through `goals` on `truth` (all of it known).
   static Result compute(const EsdfMap& truth, const Eigen::Vector3d& start, const std::vector<Eigen::Vector3d>& goals,
                         const Config& config);
+  /// The same within the planner's map window (origin, size): the true map's occupied voxels there,
+  /// everything else in it free, nothing outside. The simulator's true map reaches beyond the
+  /// planner's window (a margin around the obstacles), where the oracle would fly round the end of
+  /// a wall that closes the planner's world.
+  static Result computeInWindow(const OccupancyMap& truth, const Eigen::Vector3d& window_origin_m,
+                                const Eigen::Vector3d& window_size_m, const Eigen::Vector3d& start,
+                                const std::vector<Eigen::Vector3d>& goals, const Config& config);
 };
 
 }  // namespace topo_planner

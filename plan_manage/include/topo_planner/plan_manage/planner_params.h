@@ -75,6 +75,8 @@ void readFsmParams(Reader& r, ReplanFsm::Config* fsm, double* reference_speed_ra
   r.read("route/cell_voxels", f.route.cell_voxels);
   r.read("route/preferred_clearance_m", f.route.preferred_clearance_m);
   r.read("route/avoid_weight", f.route.avoid_weight);
+  f.route.unknown_weight = 1.0;
+  r.read("route/unknown_weight", f.route.unknown_weight);
   r.read("route/clearance_weight", f.route.clearance_weight);
   r.read("route/heuristic_weight", f.route.heuristic_weight);
   r.read("route/min_z_m", f.route.min_z_m);

@@ -105,6 +105,14 @@ class SimFlight {
                     const Config& config, const Observer& observer = {});
 };
 
+/// The configuration the nodes fly: config_dir's planner.yaml (readFsmParams), mapping.yaml,
+/// depth_camera.yaml and traj_server.yaml, at the flight's limits (the launch files' max_vel and
+/// max_acc), with realistic sensing's depth noise and holes when asked; every planning budget a
+/// count (deterministic). The map window is config/mapping.yaml's; set the flight's. False with the
+/// reason when a file cannot be read or a value is out of range.
+bool loadSimFlightConfig(const std::string& config_dir, double max_vel_mps, double max_acc_mps2, bool realistic,
+                         SimFlight::Config* config, std::string* why);
+
 /// "goals 3/3, collisions 0, min clearance 0.45 m, 20.1 s (oracle 13.2 s, 1.52x), mean 1.9 m/s, ..."
 std::string formatSimFlight(const SimFlight::Result& result);
 

@@ -7,7 +7,8 @@
 //               is at rest, or a slow manoeuvre (escape, back-off) is flown: held or stalled
 //   braking     an emergency braking trajectory, or the server's own stop (watchdog, end stop)
 //   commitment  past the brake point of a plan cut before unknown space (the known-space commitment:
-//               its committed stop, and the rest at its end)
+//               its committed stop, and the rest at its end), or within takeover_window_s of a plan
+//               that took over from such a stop (it starts from the speed the stop left)
 //   takeover    within takeover_window_s of a plan's take-over, the plan it replaced would command
 //               more than takeover_loss_mps faster now (and was not braking yet): the new plan slowed
 //   tracking    the command is fast, the vehicle is not (the controller lags)

@@ -474,6 +474,8 @@ class ReplanFsm {
   /// The stall rule (Config::progress_timeout_s), once per tick before the state machine: true when
   /// it acted (re-route, stop, back-off or give-up) and the tick ends there.
   bool handleStallLocked(double t, const EsdfMap& map, FsmOutput* out);
+  /// A place stalled at, for every later route search (the oldest dropped beyond kMaxStallZones).
+  void addStallZoneLocked(const GlobalRouter::Zone& zone);
   /// The mission's reference could not be rebuilt (startGoalsLocked refused its remaining goals):
   /// goals now invalid end the mission (give_up, saying why); a reference that failed its limits is
   /// rebuilt from rest (a moving vehicle stops first) instead of dropping the mission.
@@ -570,7 +572,8 @@ class ReplanFsm {
   double stall_gain_s_ = 0.0;             // progress_.lastGain() when stalls_ was last reset
   bool backoff_when_stopped_ = false;     // a stall remedy: back off once the stop it began has ended
   double progress_tick_s_ = NAN;          // the last tick that measured progress (or paused it) [s]
-  std::vector<GlobalRouter::Zone> stall_zones_;  // where this mission stalled: its route searches avoid them
+  std::vector<GlobalRouter::Zone> stall_zones_;  // where missions stalled: later route searches avoid them
+  static constexpr size_t kMaxStallZones = 32;
   double takeover_delay_s_;       // the adaptive takeover delay (tick() only writes it, under the mutex)
 };
 
