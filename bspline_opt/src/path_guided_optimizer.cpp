@@ -60,6 +60,31 @@ Eigen::MatrixX3d PathGuidedOptimizer::guideSamples(const Path& path, int m) {
   return g;
 }
 
+Eigen::MatrixX3d PathGuidedOptimizer::guideSamplesAlong(const Path& guide, const Eigen::MatrixX3d& q, int first,
+                                                       int last) {
+  assert(!guide.empty() && first >= 1 && last >= first && last + 1 < q.rows());
+  const int m = last - first + 1;
+  std::vector<double> polygon{0.0};
+  for (int i = 1; i < q.rows(); ++i) polygon.push_back(polygon.back() + (q.row(i) - q.row(i - 1)).norm());
+  double total = 0.0;
+  for (size_t i = 1; i < guide.size(); ++i) total += (guide[i] - guide[i - 1]).norm();
+  if (!(polygon.back() > 1e-9) || guide.size() == 1 || !(total > 0.0)) return guideSamples(guide, m);
+  Eigen::MatrixX3d g(m, 3);
+  size_t seg = 1;
+  double seg_start = 0.0, seg_len = (guide[1] - guide[0]).norm();
+  for (int j = 0; j < m; ++j) {
+    const double target = total * polygon[size_t(first + j)] / polygon.back();  // non-decreasing in j
+    while (seg + 1 < guide.size() && seg_start + seg_len < target) {
+      seg_start += seg_len;
+      ++seg;
+      seg_len = (guide[seg] - guide[seg - 1]).norm();
+    }
+    const double f = seg_len > 0.0 ? std::clamp((target - seg_start) / seg_len, 0.0, 1.0) : 1.0;
+    g.row(j) = (guide[seg - 1] + f * (guide[seg] - guide[seg - 1])).transpose();
+  }
+  return g;
+}
+
 namespace {
 
 // The phase-2 problem handed to NLopt: the free control points flattened row by row.
@@ -192,7 +217,8 @@ OptimizationResult PathGuidedOptimizer::guidePhase(const UniformBspline& initial
   const int n = initial.numControlPoints(), p = initial.degree();
   const int first = p, last = n - 1 - p, m = last - first + 1;
   const Eigen::MatrixX3d& q0 = initial.controlPoints();
-  const Eigen::MatrixX3d g = guideSamples(guide, m);
+  const Eigen::MatrixX3d g =
+      config_.guide_follows_initial ? guideSamplesAlong(guide, q0, first, last) : guideSamples(guide, m);
 
   // H = l1s D_f^T D_f + l1g I (lower band: diagonal, first and second subdiagonal) and
   // b = l1g G - l1s D_f^T D_c Q_c, from the second differences that touch a free point.

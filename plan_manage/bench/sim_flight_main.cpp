@@ -5,6 +5,7 @@
 //   sim_flight (--map FILE.bt | --forest STYLE DENSITY SEED) --start X Y Z --goals "X Y Z ..."
 //              [--config DIR] [--max-vel V] [--max-acc A] [--sensing ideal|realistic]
 //              [--window OX OY OZ SX SY SZ] [--goal-timeout S] [--json FILE] [--trace FILE.csv] [--quiet]
+//              [--param name=value ...] (config/planner.yaml overrides) [--dump-plans DIR FROM TO]
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -86,6 +87,7 @@ int main(int argc, char** argv) {
   double max_vel = 3.0, max_acc = 2.5, goal_timeout = 90.0;
   std::vector<double> window{-20.0, -10.0, 0.3, 40.0, 20.0, 3.4};
   bool quiet = false;
+  std::vector<std::pair<std::string, std::string>> overrides;  // --param fsm/x=1 (config/planner.yaml)
   std::string dump_dir;  // --dump-plans DIR FROM TO: every planning problem in [FROM, TO] s (replay_plan)
   double dump_from = 0.0, dump_to = -1.0;
   for (int i = 1; i < argc; ++i) {
@@ -107,6 +109,12 @@ int main(int argc, char** argv) {
     else if (a == "--json" && need(1)) json = argv[++i];
     else if (a == "--trace" && need(1)) trace = argv[++i];
     else if (a == "--quiet") quiet = true;
+    else if (a == "--param" && need(1)) {
+      const std::string kv = argv[++i];
+      const size_t eq = kv.find('=');
+      if (eq == std::string::npos) return usage("--param needs name=value");
+      overrides.emplace_back(kv.substr(0, eq), kv.substr(eq + 1));
+    }
     else if (a == "--dump-plans" && need(3)) {
       dump_dir = argv[++i];
       dump_from = std::atof(argv[++i]);
@@ -124,7 +132,7 @@ int main(int argc, char** argv) {
   // The planner, mapping, camera and trajectory server as configured in config/*.yaml.
   std::string why;
   SimFlight::Config c;
-  if (!loadSimFlightConfig(config_dir, max_vel, max_acc, sensing == "realistic", &c, &why)) return usage(why);
+  if (!loadSimFlightConfig(config_dir, max_vel, max_acc, sensing == "realistic", &c, &why, overrides)) return usage(why);
   c.goal_timeout_s = goal_timeout;
   c.map.origin_m = Eigen::Vector3d(window[0], window[1], window[2]);
   c.map.size_m = Eigen::Vector3d(window[3], window[4], window[5]);

@@ -484,6 +484,7 @@ bool readPlannerParams(const ros::NodeHandle& nh, PlannerServer::Config* config)
   r.read("goals_m", goals);
   if (goals.size() % 3 != 0) r.errors() << "goals_m must hold x, y, z triples; ";
   for (size_t i = 0; i + 2 < goals.size(); i += 3) c.node.goals.emplace_back(goals[i], goals[i + 1], goals[i + 2]);
+  f.sensing_range_m = c.mapping.occupancy.max_ray_length_m;  // unless fsm/sensing_range_m says otherwise
   readFsmParams(r, &f, &c.node.reference_speed_ratio);
 
   std::string why;

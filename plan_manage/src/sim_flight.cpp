@@ -300,11 +300,17 @@ SimFlight::Result SimFlight::fly(const TruthMap& truth, const Eigen::Vector3d& s
 }
 
 bool loadSimFlightConfig(const std::string& config_dir, double max_vel_mps, double max_acc_mps2, bool realistic,
-                         SimFlight::Config* config, std::string* why) {
+                         SimFlight::Config* config, std::string* why,
+                         const std::vector<std::pair<std::string, std::string>>& planner_overrides) {
   const double max_vel = max_vel_mps, max_acc = max_acc_mps2;
   SimFlight::Config& c = *config;
   std::optional<YamlParams> planner = YamlParams::load(config_dir + "/planner.yaml", why);
   if (!planner) return false;
+  for (const auto& [name, value] : planner_overrides)
+    if (!planner->set(name, value)) {
+      *why = "cannot set " + name + " to " + value;
+      return false;
+    }
   double ratio = 0.75;
   readFsmParams(*planner, &c.fsm, &ratio);
   setFlightLimits(max_vel, max_acc, ratio, &c.fsm);
@@ -328,6 +334,7 @@ bool loadSimFlightConfig(const std::string& config_dir, double max_vel_mps, doub
   mapping->read("map/prob_occupied", c.map.prob_occupied);
   mapping->read("map/min_ray_length_m", c.map.min_ray_length_m);
   mapping->read("map/max_ray_length_m", c.map.max_ray_length_m);
+  if (!planner->has("fsm/sensing_range_m")) c.fsm.sensing_range_m = c.map.max_ray_length_m;  // as the planner node
   mapping->read("map/depth_pixel_skip", c.map.depth_pixel_skip);
   mapping->read("map/merge_rays", c.map.merge_rays);
   mapping->read("esdf/max_distance_m", c.esdf.max_distance_m);

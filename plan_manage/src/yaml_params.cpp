@@ -47,4 +47,29 @@ YAML::Node YamlParams::find(const std::string& name) const {
   return path.back();
 }
 
+bool YamlParams::set(const std::string& name, const std::string& yaml_value) {
+  YAML::Node value;
+  try {
+    value = YAML::Load(yaml_value);
+  } catch (const YAML::Exception&) {
+    return false;
+  }
+  YAML::Node at = root_;
+  size_t begin = 0;
+  while (true) {
+    const size_t end = name.find('/', begin);
+    const std::string key = name.substr(begin, end == std::string::npos ? std::string::npos : end - begin);
+    if (key.empty() || !at.IsMap()) return false;
+    if (end == std::string::npos) {
+      at[key] = value;
+      return true;
+    }
+    YAML::Node next = at[key];
+    if (!next.IsDefined() || next.IsNull()) next = YAML::Node(YAML::NodeType::Map);
+    at[key] = next;
+    at.reset(next);  // descend without assigning through the reference
+    begin = end + 1;
+  }
+}
+
 }  // namespace topo_planner

@@ -71,6 +71,7 @@ bool ReplanFsm::Config::validate(std::string* why) const {
     return bad("max_brake_acc_mps2 must be >= brake_acc_mps2");
   if (!(commit_brake_acc_mps2 > 0.0 && commit_brake_acc_mps2 <= max_brake_acc_mps2))
     return bad("commit_brake_acc_mps2 must be in (0, max_brake_acc_mps2]");
+  if (!(sensing_range_m >= 0.0) || !std::isfinite(sensing_range_m)) return bad("sensing_range_m must be >= 0");
   if (!(escape_clearance_m > 0.0) || !std::isfinite(escape_clearance_m)) return bad("escape_clearance_m must be positive");
   if (!(escape_speed_mps > 0.0) || !std::isfinite(escape_speed_mps)) return bad("escape_speed_mps must be positive");
   if (!(escape_min_clearance_m > 0.0) || !(escape_min_clearance_m <= escape_clearance_m))
@@ -126,7 +127,22 @@ TopoReplanner::Config ReplanFsm::replannerConfig(const Config& config) {
   TopoReplanner::Config c = config.replanner;
   c.search.roadmap.min_z_m = c.astar.min_z_m = c.optimizer.min_z_m = config.route.min_z_m;
   c.search.roadmap.max_z_m = c.astar.max_z_m = c.optimizer.max_z_m = config.route.max_z_m;
+  // Not faster than the camera's depth allows (see sensing_range_m): the plans, their checks and their
+  // time reallocation (which would otherwise stretch a curve to a speed that is never flown).
+  if (config.sensing_range_m > 0.0) c.cruise_speed_mps = c.optimizer.max_vel_mps = cruiseSpeed(config);
   return c;
+}
+
+double ReplanFsm::cruiseSpeed(const Config& config) {
+  const double max_vel = config.replanner.optimizer.max_vel_mps;
+  if (!(config.sensing_range_m > 0.0)) return max_vel;
+  // The largest v with v T + v^2 / 2a <= d: T the reaction (the take-over delay, a depth frame and a
+  // tick: 0.1 s, and half of the stop's onset), a the committed stop's deceleration, d the depth the
+  // map reaches less the committed stop's clearance and margin.
+  const double a = config.commit_brake_acc_mps2, T = config.takeover_delay_s + 0.1 + 0.05;
+  const double d = std::max(0.0, config.sensing_range_m - config.safety_clearance_m - config.commit_margin_m);
+  const double v = a * (-T + std::sqrt(T * T + 2.0 * d / a));
+  return std::min(max_vel, std::max(v, 0.5));
 }
 
 std::unique_ptr<ReplanFsm> ReplanFsm::create(const Config& config, std::string* error) {
@@ -662,6 +678,12 @@ ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::s
                                                     std::to_string(hit - t) + " s after braking starts");
   }
   return brake;
+}
+
+ReferenceConfig ReplanFsm::referenceConfigLocked() const {
+  ReferenceConfig r = config_.reference;
+  r.max_vel_mps = std::min(r.max_vel_mps, cruiseSpeed(config_));
+  return r;
 }
 
 KnownSpaceCommitment::Config ReplanFsm::commitmentConfig(const Config& c) {
@@ -1264,7 +1286,7 @@ bool ReplanFsm::startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out) {
   if (waypoints.size() < 2) waypoints.push_back(goals.back() + Eigen::Vector3d(1e-3, 0, 0));
   PolynomialTrajectory ref;
   const TrajectoryStatus status =
-      referenceTrajectory(waypoints, start, FlatState::atRest(waypoints.back()), config_.reference, &ref);
+      referenceTrajectory(waypoints, start, FlatState::atRest(waypoints.back()), referenceConfigLocked(), &ref);
   if (status != TrajectoryStatus::kSuccess)
     return refuse(GoalStatus::kReferenceFailed, std::string("minimum-snap reference: ") + toString(status));
   goals_ = goals;

@@ -66,6 +66,7 @@ bool TopoReplanner::Config::validate(std::string* why) const {
   if (num_threads < 1 || num_threads > 64) err << "num_threads must be in [1, 64]; ";
   if (!(std::isfinite(duration_weight) && duration_weight >= 0.0)) err << "duration_weight must be >= 0; ";
   if (!(max_selection_delay_ratio >= 1.0)) err << "max_selection_delay_ratio must be >= 1; ";
+  if (!(std::isfinite(cruise_speed_mps) && cruise_speed_mps >= 0.0)) err << "cruise_speed_mps must be >= 0; ";
   const std::string s = err.str();
   if (why) *why = s.empty() ? "" : s.substr(0, s.size() - 2);
   return s.empty();
@@ -83,7 +84,12 @@ std::unique_ptr<TopoReplanner> TopoReplanner::create(const Config& config, std::
 TopoReplanner::TopoReplanner(const Config& config)
     : config_(config),
       pool_(config.num_threads),
-      optimizers_(size_t(config.num_threads), PathGuidedOptimizer(config.optimizer)),
+      optimizers_(size_t(config.num_threads), PathGuidedOptimizer([&] {
+                    // An initial timed from the vehicle's speed: its guide phase keeps that timing.
+                    PathGuidedOptimizer::Config c = config.optimizer;
+                    c.guide_follows_initial = c.guide_follows_initial || config.profile_timing;
+                    return c;
+                  }())),
       checker_([&] {
         PathGuidedOptimizer::Config c = config.optimizer;
         c.reallocate_time = false;
@@ -281,18 +287,44 @@ bool TopoReplanner::profileTimedSegment(const PolynomialTrajectory& ref, const F
     Eigen::Vector3d p;
     double s, cap;
   };
-  std::vector<Point> path{{start.position, 0.0, INFINITY}};
+  // From the start along its velocity into the reference a little ahead (a cubic Hermite blend): the
+  // start may lie off the reference (after a detour), and a first leg straight to the reference's
+  // next point jumped sideways, which the fit made a spike of the speed (4.6 m/s at 0.2 s from
+  // 1.6 m/s) and the refine a kink that only a stretch of the whole plan could fly.
   const double dt = config_.reference_sample_s;
-  for (double t = t0 + dt;; t = std::min(t_g, t + dt)) {
+  std::vector<double> ref_t;
+  std::vector<Eigen::Vector3d> ref_p;
+  for (double t = t0;; t = std::min(t_g, t + dt)) {
     const Eigen::Vector3d p = ref.position(t);
-    const double step = (p - path.back().p).norm();
-    if (step >= 0.02 || t >= t_g) path.push_back({p, path.back().s + step, ref.velocity(t).norm()});
+    if (ref_p.empty() || (p - ref_p.back()).norm() >= 0.02 || t >= t_g) ref_p.push_back(p), ref_t.push_back(t);
     if (t >= t_g) break;
   }
+  const double speed0 = start.velocity.norm();
+  const double join_m = std::clamp(0.5 + 0.5 * speed0, 1.0, 3.0);
+  size_t j = 0;
+  while (j + 1 < ref_p.size() && (ref_p[j] - start.position).norm() < join_m) ++j;
+  std::vector<Point> path{{start.position, 0.0, INFINITY}};
+  const Eigen::Vector3d to_join = ref_p[j] - start.position;
+  const double L = to_join.norm();
+  const double join_cap = ref.velocity(ref_t[j]).norm();
+  if (L > 1e-3) {
+    const Eigen::Vector3d m0 = (speed0 > 0.1 ? Eigen::Vector3d(start.velocity / speed0) : Eigen::Vector3d(to_join / L)) * L;
+    const Eigen::Vector3d ref_dir = ref.velocity(ref_t[j]);
+    const Eigen::Vector3d m1 = (ref_dir.norm() > 1e-6 ? Eigen::Vector3d(ref_dir.normalized()) : Eigen::Vector3d(to_join / L)) * L;
+    const int k_max = std::max(2, int(std::ceil(L / 0.05)));
+    for (int k = 1; k <= k_max; ++k) {
+      const double u = double(k) / k_max, u2 = u * u, u3 = u2 * u;
+      const Eigen::Vector3d p = (2 * u3 - 3 * u2 + 1) * start.position + (u3 - 2 * u2 + u) * m0 +
+                                (-2 * u3 + 3 * u2) * ref_p[j] + (u3 - u2) * m1;
+      path.push_back({p, path.back().s + (p - path.back().p).norm(), join_cap});
+    }
+  }
+  for (size_t k = j + 1; k < ref_p.size(); ++k)
+    path.push_back({ref_p[k], path.back().s + (ref_p[k] - path.back().p).norm(), ref.velocity(ref_t[k]).norm()});
   const size_t n = path.size();
   if (n < 2 || !(path.back().s > 1e-6)) return false;
   const double a = config_.optimizer.max_acc_mps2 * config_.optimizer.feasibility_margin;
-  const double vmax = config_.optimizer.max_vel_mps;
+  const double vmax = cruiseSpeed();
   std::vector<double> v(n);
   v[n - 1] = std::min(vmax, path[n - 1].cap);
   for (size_t i = n - 1; i-- > 0;)

@@ -551,3 +551,63 @@ TEST(TopoReplanner, TheSmoothestAmongTheFastestIsChosen) {
 
 }  // namespace
 }  // namespace topo_planner
+
+namespace topo_planner {
+namespace {
+
+// profile_timing: a vehicle slower than the reference's timing (it started late, it slowed for an
+// obstacle) is not asked to catch up with it. From 1.5 m/s on a reference cruising at 5 m/s, the
+// reference's own timing asks for a jump in speed at the start; the profile-timed segment starts
+// at the vehicle's speed and accelerates within the optimiser's limit.
+TEST(TopoReplanner, TheLocalSegmentIsTimedFromTheVehiclesSpeed) {
+  SyntheticScene scene({30.0, 8.0, 3.0});
+  const EsdfMap& map = scene.finish();
+  ReferenceConfig rc;
+  rc.max_vel_mps = 5.0;
+  rc.max_acc_mps2 = 2.5;
+  rc.max_segment_length_m = 3.0;
+  rc.cruise_timing = true;
+  PolynomialTrajectory ref;
+  ASSERT_EQ(referenceTrajectory({{2, 4, 1.5}, {28, 4, 1.5}}, FlatState::atRest({2, 4, 1.5}), FlatState::atRest({28, 4, 1.5}), rc,
+                                &ref),
+            TrajectoryStatus::kSuccess);
+  double fastest = 0.0;  // where the reference cruises fastest
+  for (double t = 0.0; t < ref.duration() / 2.0; t += 0.01)
+    if (ref.velocity(t).norm() > ref.velocity(fastest).norm()) fastest = t;
+  ReplanRequest req = requestAlong(ref, fastest);
+  ASSERT_GT(req.start.velocity.norm(), 3.5);
+  req.start.velocity = req.start.velocity.normalized() * 1.5;  // the vehicle is slower
+  req.start.acceleration.setZero();
+  for (const bool profile : {false, true}) {
+    TopoReplanner::Config c = deterministicConfig(1);
+    c.optimizer.max_vel_mps = 5.0;
+    c.optimizer.max_acc_mps2 = 2.5;
+    c.profile_timing = profile;
+    std::string err;
+    auto r = TopoReplanner::create(c, &err);
+    ASSERT_TRUE(r) << err;
+    const LocalProblem lp = r->localProblem(map, req);
+    ASSERT_EQ(lp.status, ReplanStatus::kSuccess) << lp.message;
+    const UniformBspline acc = lp.initial.derivative().derivative();
+    // The worst acceleration, and the worst past the first half second: the fit meets the start's
+    // zero acceleration while the profile asks for the limit at once, a short transient the refine
+    // phase smooths; past it the profile itself is what is fitted.
+    double worst = 0.0, worst_after = 0.0;
+    for (double t = 0.0; t <= lp.initial.duration(); t += 0.01) {
+      worst = std::max(worst, acc.evaluate(t).norm());
+      if (t > 0.5) worst_after = std::max(worst_after, acc.evaluate(t).norm());
+    }
+    std::printf("profile timing %d: initial %.2f s, worst acceleration %.1f m/s^2 (%.1f past 0.5 s)\n", int(profile),
+                lp.initial.duration(), worst, worst_after);
+    if (profile) {
+      EXPECT_LT(worst, 2.5 * 2.5);
+      EXPECT_LT(worst_after, 1.3 * 2.5);
+      EXPECT_NEAR(lp.initial.derivative().evaluate(0.0).norm(), 1.5, 1e-6);
+    } else {
+      EXPECT_GT(worst, 2.0 * 2.5) << "the reference's timing asks for a jump (this test's premise)";
+    }
+  }
+}
+
+}  // namespace
+}  // namespace topo_planner

@@ -5,7 +5,9 @@
 //  * GuidePhase (phase 1), Eq. 1-3: f_p1 = l1s f_s + l1g f_g over the free control points
 //    Q_p..Q_{N-p} (the first and last p are fixed by the boundary states). f_s is the elastic band
 //    of Eq. 2, f_g the squared distance of Q_i to G_i, the guide path sampled uniformly by arc length
-//    (G_p..G_{N-p} at arc length (i - p + 1) / (N - 2p + 2), the ends excluded). It is an
+//    (G_p..G_{N-p} at arc length (i - p + 1) / (N - 2p + 2), the ends excluded; with
+//    guide_follows_initial, at the fractions of the guide's length that the initial's control
+//    points lie at along its control polygon, keeping the initial's timing). It is an
 //    unconstrained QP with a pentadiagonal SPD Hessian l1s D^T D + l1g I: one banded LDL^T
 //    factorisation and one solve for the three coordinates, no iteration.
 //  * RefinePhase (phase 2), Eq. 4: f_p2 = l2s f_s + l2c f_c + l2d (f_v + f_a) with the terms of
@@ -89,6 +91,11 @@ class PathGuidedOptimizer {
     // Phase 1, Eq. 1: f_p1 = l1s f_s + l1g f_g.
     double l1s = 1.0;  ///< lambda_1s: smoothness weight of the guide phase
     double l1g = 1.0;  ///< lambda_1g: guide weight (> 0, makes the QP strictly convex)
+    /// The guide points spaced as the initial spline's control points are along its polygon (its
+    /// timing) instead of uniformly (a constant pace). An initial that accelerates from a slow start
+    /// (TopoReplanner's profile_timing) pulled to a constant pace had control-point accelerations
+    /// of 24 m/s^2 in its guide phase, and the stretched retry stretched the plan 2.5x for them.
+    bool guide_follows_initial = false;
     // Phase 2, Eq. 4: f_p2 = l2s f_s + l2c f_c + l2d (f_v + f_a).
     double l2s = 1.0;   ///< lambda_2s: smoothness weight of the refine phase
     double l2c = 10.0;  ///< lambda_2c: collision weight
@@ -161,6 +168,10 @@ class PathGuidedOptimizer {
   /// i / (count + 1), i = 1..count, of the guide (its ends excluded), one per row. Precondition:
   /// non-empty guide, count >= 1.
   static Eigen::MatrixX3d guideSamples(const Path& guide, int count);
+  /// The guide points of the free control points first..last of `q` (a spline's control points)
+  /// at the fractions of the guide's length that they lie at along q's control polygon (see
+  /// guide_follows_initial). Uniform (guideSamples) when the polygon has no length.
+  static Eigen::MatrixX3d guideSamplesAlong(const Path& guide, const Eigen::MatrixX3d& q, int first, int last);
 
   /// Phase 1 only: the warm-up spline (kSuccess) with cost.guide and cost.smoothness; no check.
   OptimizationResult guidePhase(const UniformBspline& initial, const Path& guide) const;

@@ -104,6 +104,7 @@ void readFsmParams(Reader& r, ReplanFsm::Config* fsm, double* reference_speed_ra
   r.read("fsm/max_brake_acc_mps2", f.max_brake_acc_mps2);
   f.commit_brake_acc_mps2 = f.max_brake_acc_mps2;
   r.read("fsm/commit_brake_acc_mps2", f.commit_brake_acc_mps2);
+  r.read("fsm/sensing_range_m", f.sensing_range_m);
 
   TopoReplanner::Config& p = f.replanner;
   p.local_goal_margin_m = 2.0;  // 1 m failed 44 of 344 moving-start replans, 2 m 4 (README)
@@ -116,6 +117,7 @@ void readFsmParams(Reader& r, ReplanFsm::Config* fsm, double* reference_speed_ra
   r.read("replan/control_point_spacing_m", p.control_point_spacing_m);
   p.profile_timing = true;
   r.read("replan/profile_timing", p.profile_timing);
+  r.read("replan/max_selection_delay_ratio", p.max_selection_delay_ratio);
   r.read("replan/guide_timing_ratio", p.guide_timing_ratio);
   r.read("replan/max_search_start_offset_m", p.max_search_start_offset_m);
   r.read("replan/min_start_clearance_m", p.min_start_clearance_m);

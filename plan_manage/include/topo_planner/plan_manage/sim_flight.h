@@ -111,7 +111,8 @@ class SimFlight {
 /// count (deterministic). The map window is config/mapping.yaml's; set the flight's. False with the
 /// reason when a file cannot be read or a value is out of range.
 bool loadSimFlightConfig(const std::string& config_dir, double max_vel_mps, double max_acc_mps2, bool realistic,
-                         SimFlight::Config* config, std::string* why);
+                         SimFlight::Config* config, std::string* why,
+                         const std::vector<std::pair<std::string, std::string>>& planner_overrides = {});
 
 /// "goals 3/3, collisions 0, min clearance 0.45 m, 20.1 s (oracle 13.2 s, 1.52x), mean 1.9 m/s, ..."
 std::string formatSimFlight(const SimFlight::Result& result);

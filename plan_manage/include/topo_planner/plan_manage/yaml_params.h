@@ -26,6 +26,9 @@ class YamlParams {
   void read(const std::string& name, std::string& value) { readAs(name, value); }
   void read(const std::string& name, std::vector<double>& value) { readAs(name, value); }
   bool has(const std::string& name) const { return bool(find(name)); }
+  /// Sets (or adds) a parameter from YAML text, e.g. set("fsm/brake_acc_mps2", "3.0"): an override
+  /// from a command line. False when the text does not parse or a parent is not a map.
+  bool set(const std::string& name, const std::string& yaml_value);
   std::ostringstream& errors() { return errors_; }
 
  private:

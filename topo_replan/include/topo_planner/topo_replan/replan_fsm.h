@@ -277,6 +277,12 @@ class ReplanFsm {
     /// plan may start stopping before unknown space. Up to max_brake_acc_mps2, the vehicle's limit;
     /// it is flown only when no new plan takes over in time [m/s^2].
     double commit_brake_acc_mps2 = 2.5;
+    /// How far ahead the map learns the space from the camera (the mapping's max_ray_length_m): the
+    /// reference and the local plans aim at no more than the speed from which the vehicle can stop,
+    /// at commit_brake_acc_mps2, within that depth after its reaction (cruiseSpeed()). Planned
+    /// faster, every plan is cut before unknown space and the turns it must make at that speed
+    /// stretch it whole: at max_vel 7 the vehicle flew slower than at 5. 0: max_vel [m].
+    double sensing_range_m = 0.0;
 
     // Input liveness (see the class comment).
     double depth_timeout_s = 0.5;       ///< depth older than this is stale; 0: depth is not required [s]
@@ -387,6 +393,8 @@ class ReplanFsm {
   /// ticking.
   /// The replanner's config the FSM plans with: config.replanner within the route's height band.
   static TopoReplanner::Config replannerConfig(const Config& config);
+  /// The speed the plans aim at (see sensing_range_m): the optimiser's max_vel, or less [m/s].
+  static double cruiseSpeed(const Config& config);
   /// The known-space commitment's settings of a config (its clearance, margin, back-up deceleration, band).
   static KnownSpaceCommitment::Config commitmentConfig(const Config& config);
   using PlanObserver = std::function<void(const EsdfMap&, const ReplanRequest&, const ReplanResult&)>;
@@ -411,6 +419,8 @@ class ReplanFsm {
 
   // All *Locked functions expect mutex_ held.
   void setState(FsmState s, FsmOutput* out, const std::string& why);
+  /// The reference's limits, its speed no more than cruiseSpeed().
+  ReferenceConfig referenceConfigLocked() const;
   void applyPendingConfigLocked(FsmOutput* out);
   bool startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out);
   /// Goals against the map: kAccepted, or kGoalOutOfMap / kGoalInObstacle with why (goal index).

@@ -177,6 +177,9 @@ class TopoReplanner {
     /// slowed for an obstacle) is not asked to catch up with it, which asked for 22-220 m/s^2 at the
     /// start and stretched every candidate (time ratios of 1.3-1.6 at 5 m/s in the open).
     bool profile_timing = false;
+    /// The local segment's timing aims at no more than this speed (the FSM's
+    /// cruiseSpeed: what the camera's depth allows); 0: the optimiser's max_vel [m/s].
+    double cruise_speed_mps = 0.0;
     /// A guide path longer than this times the reference segment whose candidate failed from the
     /// segment's timing is optimised again from an initial spline along the guide, timed for its
     /// length (initialAlong).
@@ -236,6 +239,11 @@ class TopoReplanner {
   bool profileTimedSegment(const PolynomialTrajectory& ref, const FlatState& start, double t0, double t_g, int segments,
                            Eigen::Vector3d* goal_velocity, Eigen::Vector3d* goal_acceleration,
                            UniformBspline* out) const;
+  /// The speed the timing aims at: cruise_speed_mps when set, the optimiser's max_vel otherwise.
+  double cruiseSpeed() const {
+    return config_.cruise_speed_mps > 0.0 ? std::min(config_.cruise_speed_mps, config_.optimizer.max_vel_mps)
+                                          : config_.optimizer.max_vel_mps;
+  }
   /// An initial spline along `guide`, timed for its length, when the guide is longer than
   /// guide_timing_ratio times the reference segment (a candidate that failed from the segment's
   /// timing is optimised again from it); nullopt otherwise.
