@@ -353,6 +353,63 @@ TEST(ReplanFsm, ReconfiguredLimitsApplyFromTheNextPlan) {
   expectContinuous(log.trajectories);
 }
 
+// The plans aim no faster than a stop within what the camera has seen allows: the cruise speed
+// from the sensing range (the take-over reaction, then the committed stop's deceleration, ending
+// the clearance and margin short of the range) caps the plans and the reference.
+TEST(ReplanFsm, TheCruiseSpeedIsBoundedByTheSensingRange) {
+  ReplanFsm::Config config = testConfig();
+  config.replanner.optimizer.max_vel_mps = 7.0;
+  config.reference.max_vel_mps = 7.0;
+  config.reference.max_acc_mps2 = 2.5;
+  config.commit_brake_acc_mps2 = 5.0;
+  config.reference.profile_timing = config.replanner.profile_timing = true;  // the planner node's timing
+  config.replanner.horizon_time_s = 3.0;
+  EXPECT_DOUBLE_EQ(ReplanFsm::cruiseSpeed(config), 7.0);  // no range given: max_vel
+  config.sensing_range_m = 4.5;
+  const double v = ReplanFsm::cruiseSpeed(config);
+  const double T = config.takeover_delay_s + 0.15;
+  const double d = 4.5 - config.safety_clearance_m - config.commit_margin_m;
+  EXPECT_NEAR(v * T + v * v / (2.0 * config.commit_brake_acc_mps2), d, 1e-9);  // stops exactly within it
+  EXPECT_GT(v, 4.0);
+  EXPECT_LT(v, 6.0);
+  ReplanFsm::Config shorter = config;
+  shorter.sensing_range_m = 3.0;
+  EXPECT_LT(ReplanFsm::cruiseSpeed(shorter), v);
+  shorter.sensing_range_m = 100.0;
+  EXPECT_DOUBLE_EQ(ReplanFsm::cruiseSpeed(shorter), 7.0);  // never above max_vel
+  EXPECT_DOUBLE_EQ(ReplanFsm::replannerConfig(config).optimizer.max_vel_mps, v);
+  config.sensing_range_m = std::nan("");
+  std::string why;
+  EXPECT_FALSE(config.validate(&why));
+  EXPECT_NE(why.find("sensing_range_m"), std::string::npos) << why;
+
+  // Flown down a free 21 m corridor with a 2 m range: no plan is faster than the cruise speed;
+  // without it the same flight goes faster (this test's premise).
+  Corridor c;
+  const EsdfMap& map = c.scene.finish();
+  auto peakSpeed = [](const FlightLog& log) {
+    double peak = 0.0;
+    for (const ExecTrajectory& t : log.trajectories) peak = std::max(peak, t.spline.maxVelocity());
+    return peak;
+  };
+  for (const double range : {0.0, 2.0}) {
+    config.sensing_range_m = range;
+    auto fsm = makeFsm(config);
+    ASSERT_TRUE(fsm);
+    const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, always(map), 1200, map);
+    EXPECT_TRUE(log.goal_reached);
+    const double cruise = ReplanFsm::cruiseSpeed(config);
+    std::printf("sensing range %.1f m: peak planned speed %.2f m/s (cruise %.2f m/s)\n", range, peakSpeed(log), cruise);
+    if (range > 0.0) {
+      EXPECT_LT(cruise, 3.5);
+      EXPECT_LE(peakSpeed(log), cruise * 1.02);
+    } else {
+      EXPECT_GT(peakSpeed(log), 3.5 * 1.05);
+    }
+    expectContinuous(log.trajectories);
+  }
+}
+
 TEST(ReplanFsm, ReplansWhenAnObstacleIsRevealedAhead) {
   Corridor before, after;
   after.scene.box({9.5, 2.5, 0.0}, {10.1, 5.5, 3.0});  // a wall across the straight line, gaps at the sides
