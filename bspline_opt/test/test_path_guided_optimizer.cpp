@@ -236,6 +236,40 @@ TEST(PathGuidedOptimizer, AStartBeyondTheLimitIsExemptTheRestIsNot) {
   EXPECT_LE(stretched.stats.max_acc_mps2, kMaxAcc * (1.0 + 1e-9));
 }
 
+// With guide_follows_initial the guide samples keep the initial curve's spacing: a curve timed to
+// accelerate (control points closer together at its start) is guided by points equally close
+// together there, at the same fractions of the guide's length as of the control polygon's.
+TEST(PathGuidedOptimizer, GuideSamplesFollowTheInitialCurvesSpacing) {
+  const Path guide{{0, 0, 1}, {4, 0, 1}, {4, 6, 1}};  // 10 m with a corner
+  Eigen::MatrixX3d q(10, 3);
+  for (int i = 0; i < 10; ++i) q.row(i) << 0.1 * i * i, 0.0, 1.0;  // accelerating along x, 8.1 m
+  const int first = 3, last = 6;
+  const Eigen::MatrixX3d g = PathGuidedOptimizer::guideSamplesAlong(guide, q, first, last);
+  ASSERT_EQ(g.rows(), last - first + 1);
+  double prev = -1.0;
+  for (int j = 0; j < g.rows(); ++j) {
+    const double frac = 0.1 * (first + j) * (first + j) / 8.1;  // the polygon is straight here
+    const double along = 10.0 * frac;                        // the same fraction of the guide
+    const Eigen::Vector3d expected =
+        along <= 4.0 ? Eigen::Vector3d(along, 0, 1) : Eigen::Vector3d(4, along - 4.0, 1);
+    EXPECT_LT((g.row(j).transpose() - expected).norm(), 1e-9) << "sample " << j;
+    EXPECT_GT(along, prev);
+    prev = along;
+  }
+  // The spacing grows as the control points' does (not even, as guideSamples gives).
+  const Eigen::MatrixX3d even = PathGuidedOptimizer::guideSamples(guide, last - first + 1);
+  EXPECT_GT((g.row(2) - g.row(1)).norm(), 1.2 * (g.row(1) - g.row(0)).norm());  // 1.11 m against 0.86 m
+  EXPECT_NEAR((even.row(3) - even.row(2)).norm(), (even.row(1) - even.row(0)).norm(), 1e-9);
+  // A polygon without length (a hold) falls back to the even samples; so does a one-point guide.
+  Eigen::MatrixX3d hold(10, 3);
+  hold.rowwise() = Eigen::RowVector3d(1, 2, 1);
+  const Eigen::MatrixX3d fallback = PathGuidedOptimizer::guideSamplesAlong(guide, hold, first, last);
+  EXPECT_LT((fallback - even).norm(), 1e-12);
+  const Path point{{1, 1, 1}};
+  const Eigen::MatrixX3d at_point = PathGuidedOptimizer::guideSamplesAlong(point, q, first, last);
+  for (int j = 0; j < at_point.rows(); ++j) EXPECT_LT((at_point.row(j) - Eigen::RowVector3d(1, 1, 1)).norm(), 1e-12);
+}
+
 TEST(PathGuidedOptimizer, InvalidInputIsAStatusNotACrash) {
   SyntheticScene scene({6.0, 6.0, 3.0});
   const EsdfMap& map = scene.finish();
