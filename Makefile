@@ -87,7 +87,7 @@ bench-flight-forests: build
 # Speed (scripts/bench_speed.py): closed-loop flights over the six world styles x ideal and realistic sensing
 # x max_vel 3, 5 and 7 (bench-flight's worlds and goals), headless: per group goals, collisions, clearance, mean
 # speed, time above 0.8 max_vel, the speed account and mission time / oracle time; results/bench_speed.md,
-# results/bench_speed_speeds.png and a RESULT line. About an hour and a half; not in CI.
+# results/bench_speed_speeds.png and a RESULT line. About 35 minutes (36 flights); not in CI.
 # bench-speed-core: the same worlds in the ROS-free closed loop (plan_manage/sim_flight.h, simulated time,
 # seconds per flight): results/speed_core/bench_speed_core.md and a RESULT line.
 bench-speed: build
