@@ -1621,12 +1621,15 @@ TEST(ReplanFsm, FliesOnFromWhereItStoppedAfterAnOdometryJumpClearedTheMap) {
   }
 }
 
-// The FSM's clock steps by +-5 s mid-flight: the commanded motion goes on without a jump, the FSM
-// replans from the current state and reaches the goal.
+// The FSM's clock steps by +-5 s mid-flight, or back by less than the forward threshold (a step
+// back of 0.78 s was taken for call ordering: every later input was refused as out of order, the
+// vehicle braked and the trajectory server, which had shifted, was a vehicle-length away): the
+// commanded motion goes on without a jump, the FSM replans from the current state and reaches the
+// goal.
 TEST(ReplanFsm, TimeJumpsShiftTheTimingWithoutASetpointJump) {
   Corridor c;
   const EsdfMap& map = c.scene.finish();
-  for (const double step : {5.0, -5.0}) {
+  for (const double step : {5.0, -5.0, -0.78, -0.3}) {
     auto fsm = makeFsm();
     Faults faults;
     faults.clock_step_at = 3.0;

@@ -99,8 +99,9 @@
 // timing in step with the server's setpoint (after a clock step each side saw at another moment).
 // Without server setpoints, the FSM's trajectory is the commanded state.
 //
-// Time. A clock that steps backwards or forwards by more than time_jump_threshold_s between two
-// calls (setOdometry's arrival time, tick, checkSafety) is a time jump: every stored time (the
+// Time. A clock that steps forwards by more than time_jump_threshold_s, or backwards by more than
+// kMaxClockDisorderS (or the threshold if smaller), between two calls (setOdometry's arrival
+// time, tick, checkSafety) is a time jump: every stored time (the
 // trajectory's start, the inputs' stamps) is shifted by the step so the commanded motion goes on
 // without a jump, and the FSM replans from the current state.
 //
@@ -225,6 +226,10 @@ struct FsmOutput {
 
 class ReplanFsm {
  public:
+  /// The longest step back of the clock between two calls taken for their order (the callers read
+  /// the clock before they take the lock), not for a time jump [s].
+  static constexpr double kMaxClockDisorderS = 0.15;
+
   struct Config {
     TopoReplanner::Config replanner;  ///< search, optimiser and horizon (horizon_m)
     ReferenceConfig reference;        ///< limits of the global reference (keep <= the optimiser's)
@@ -289,7 +294,7 @@ class ReplanFsm {
     double odom_timeout_s = 0.25;       ///< odometry that has not arrived for this long is stale [s]
     double odom_max_age_s = 0.5;        ///< odometry stamped longer ago than this is stale [s]
     double max_tracking_error_m = 0.6;  ///< odometry this far from the commanded position: hold and replan [m]
-    double time_jump_threshold_s = 1.0; ///< a clock step (either way) larger than this between calls is a time jump [s]
+    double time_jump_threshold_s = 1.0; ///< a clock step forwards larger than this between calls is a time jump [s]
     /// An intermediate goal counts as reached (and is left out of rebuilt references) once the vehicle
     /// came this close to it [m].
     double waypoint_reached_radius_m = 1.0;
