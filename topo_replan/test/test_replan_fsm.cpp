@@ -218,6 +218,13 @@ void expectContinuous(const std::vector<ExecTrajectory>& trajs, double max_veloc
   }
 }
 
+// The fastest any of a flight's trajectories was planned [m/s].
+double peakSpeed(const FlightLog& log) {
+  double peak = 0.0;
+  for (const ExecTrajectory& t : log.trajectories) peak = std::max(peak, t.spline.maxVelocity());
+  return peak;
+}
+
 TEST(ReplanFsm, RefusesGoalsWithoutOdometry) {
   Corridor c;
   const EsdfMap& map = c.scene.finish();
@@ -315,11 +322,6 @@ TEST(ReplanFsm, FliesAroundAPillarToTheGoal) {
 TEST(ReplanFsm, ReconfiguredLimitsApplyFromTheNextPlan) {
   Corridor c;
   const EsdfMap& map = c.scene.finish();
-  auto peakSpeed = [](const FlightLog& log) {
-    double peak = 0.0;
-    for (const ExecTrajectory& t : log.trajectories) peak = std::max(peak, t.spline.maxVelocity());
-    return peak;
-  };
   auto mapAt = always(map);
   const ReplanFsm::Config config = testConfig();
   auto fast = makeFsm(config);
@@ -387,11 +389,6 @@ TEST(ReplanFsm, TheCruiseSpeedIsBoundedByTheSensingRange) {
   // without it the same flight goes faster (this test's premise).
   Corridor c;
   const EsdfMap& map = c.scene.finish();
-  auto peakSpeed = [](const FlightLog& log) {
-    double peak = 0.0;
-    for (const ExecTrajectory& t : log.trajectories) peak = std::max(peak, t.spline.maxVelocity());
-    return peak;
-  };
   for (const double range : {0.0, 2.0}) {
     config.sensing_range_m = range;
     auto fsm = makeFsm(config);
