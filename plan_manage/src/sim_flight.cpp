@@ -120,6 +120,7 @@ SimFlight::Result SimFlight::fly(const TruthMap& truth, const Eigen::Vector3d& s
   double goal_given_s = 0.0, flight_start_s = NAN;
   double speed_integral = 0.0;
   Setpoint previous_setpoint;
+  double previous_setpoint_s = 0.0;  // when the server sampled it (the stamp the node's message carries)
   bool have_setpoint = false;
 
   for (long k = 0;; ++k) {
@@ -162,7 +163,7 @@ SimFlight::Result SimFlight::fly(const TruthMap& truth, const Eigen::Vector3d& s
       fsm->setOdometry(t, position, velocity);
       if (have_setpoint) {
         ServerSetpoint sp;
-        sp.stamp_s = t;
+        sp.stamp_s = previous_setpoint_s;
         sp.position = previous_setpoint.state.position;
         sp.velocity = previous_setpoint.state.velocity;
         switch (previous_setpoint.mode) {
@@ -229,6 +230,7 @@ SimFlight::Result SimFlight::fly(const TruthMap& truth, const Eigen::Vector3d& s
       velocity = sp.state.velocity;
       yaw = sp.yaw;
       previous_setpoint = sp;
+      previous_setpoint_s = t;
       have_setpoint = true;
       SpeedAccount::Setpoint as;
       as.mode = accountMode(sp.mode);
