@@ -598,8 +598,8 @@ double ReplanFsm::referenceTimeAtLocked(double t) const {
   return best;
 }
 
-double ReplanFsm::stopTimeLocked(double t) const {
-  return takeoverStateLocked(t).velocity.norm() / config_.brake_acc_mps2 + config_.emergency_margin_s + takeover_delay_s_;
+double ReplanFsm::stopTimeLocked(double t, double deceleration) const {
+  return takeoverStateLocked(t).velocity.norm() / deceleration + config_.emergency_margin_s + takeover_delay_s_;
 }
 
 double ReplanFsm::firstCollisionTime(const ExecTrajectory& traj, double t, const EsdfMap& map) const {
@@ -619,6 +619,9 @@ ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::s
   FlatState s0 = from ? *from : takeoverStateLocked(t);
   if (!current_ && !from) s0.velocity = odom_velocity_;
   const double speed = s0.velocity.norm();
+  // Nearly at rest: a hold where it is, from the commanded velocity and acceleration (the end of a
+  // stop still decelerating), so neither steps.
+  const Eigen::Vector3d creep = s0.velocity;
   if (speed < 0.05) s0.velocity.setZero();
   // Along the current trajectory's path, which was checked when it was published: a stop on a curve
   // stays on the curve instead of leaving it along the tangent. Without one (or from another state),
@@ -634,9 +637,11 @@ ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::s
   auto brakeAt = [&](double a) {
     std::vector<Eigen::Vector3d> points;
     double interval = 0.1;
-    Eigen::Vector3d start_acc = Eigen::Vector3d::Zero();
+    Eigen::Vector3d start_acc = Eigen::Vector3d::Zero(), start_vel = s0.velocity;
     if (speed < 0.05) {
       points.assign(4, s0.position);
+      start_vel = creep;
+      start_acc = s0.acceleration;
     } else if (path) {
       // From the flown acceleration (the curve's included): no step in the commanded acceleration.
       points = stopPoints(*path, 0.0, speed, a, alongAcceleration(s0.velocity, s0.acceleration), &interval);
@@ -654,7 +659,7 @@ ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::s
     ExecTrajectory brake;
     brake.start_time_s = t;
     brake.braking = true;
-    if (!UniformBspline::fitToPoints(points, interval, s0.velocity, start_acc, Eigen::Vector3d::Zero(),
+    if (!UniformBspline::fitToPoints(points, interval, start_vel, start_acc, Eigen::Vector3d::Zero(),
                                      Eigen::Vector3d::Zero(), 3, &brake.spline)) {
       // Only for a degenerate state; hold the position instead (a spline of equal points).
       brake.spline = UniformBspline::straightLine(s0.position, s0.position, 6, 3, 0.1);
@@ -1646,7 +1651,7 @@ FsmOutput ReplanFsm::tick(double t, const EsdfMap& map, const std::function<doub
       // grown map takes over while the vehicle still cruises; one that ends moving, early enough
       // before it runs out that a failed plan still leaves retries before checkSafety() must brake.
       const bool running_out = !current_->ends_at_goal &&
-                               (ended || current_->endTime() - t <= stopTimeLocked(t) + 0.5 * config_.replan_interval_s ||
+                               (ended || current_->endTime() - t <= stopTimeLocked(t, config_.brake_acc_mps2) + 0.5 * config_.replan_interval_s ||
                                 (current_->stops_before_unknown &&
                                  current_->brake_start_s - t <= takeover_delay_s_ + 0.5 * config_.replan_interval_s));
       const bool periodic = !current_->ends_at_goal && t - current_->start_time_s >= config_.replan_interval_s;
@@ -1748,14 +1753,19 @@ FsmOutput ReplanFsm::checkSafety(double t, const EsdfMap& map) {
       emergencyStopLocked(t, map, "inputs stale (" + stale + ")", &out, nullptr, ReplanStatus::kInvalidInput);
     return out;
   }
-  // Odometry far from where the vehicle was commanded to be at its stamp (a VIO jump): hold at the
-  // measured position, moving on with the commanded velocity to a stop; replanned from there.
+  // Odometry far from where the vehicle was commanded to be at its stamp (a VIO jump, or a vehicle
+  // that went its own way while the odometry was away, e.g. a flight controller's failsafe hold):
+  // hold from the measured state, moving on with the measured velocity to a stop; replanned from
+  // there. (With the commanded velocity instead, a vehicle that came back from a failsafe hold
+  // moving the other way left the stop at once and was re-anchored a second time, a setpoint jump.)
   const bool covered = odom_time_s_ >= current_->start_time_s || (previous_ && odom_time_s_ >= previous_->start_time_s);
   const double tracking_error = covered ? (odom_position_ - takeoverStateLocked(odom_time_s_).position).norm() : 0.0;
   if (tracking_error > config_.max_tracking_error_m) {
     FlatState from = takeoverStateLocked(t);
+    from.velocity = odom_velocity_;
     from.position = odom_position_ + from.velocity * std::max(0.0, t - odom_time_s_);
     from.acceleration.setZero();
+    from.jerk.setZero();
     char text[160];
     std::snprintf(text, sizeof(text), "odometry %.2f m from the commanded position (limit %.2f m): holding at the "
                   "measured position", tracking_error, config_.max_tracking_error_m);
@@ -1774,14 +1784,19 @@ FsmOutput ReplanFsm::checkSafety(double t, const EsdfMap& map) {
   if (t > current_->endTime() && state_ == FsmState::kWaitTarget) return out;
   // Time to stop from the current speed, plus the margin: a collision (or the end of a trajectory
   // that ends moving, past which nothing is planned) closer than that cannot wait for a replan.
-  const double stop_time = stopTimeLocked(t);
+  // Before a collision the vehicle may fly on, replanning at every tick, while a stop at the back-up
+  // deceleration every committed plan keeps (commit_brake_acc_mps2) still ends before it: a
+  // collision seen at the end of a plan cut before unknown space (a tree behind the edge of what
+  // was seen, a voxel that turned occupied) is a replan's business, not an emergency stop's.
+  const double collision_decel =
+      config_.commit_to_known_space ? std::max(config_.brake_acc_mps2, config_.commit_brake_acc_mps2) : config_.brake_acc_mps2;
   const double hit = firstCollisionTime(*current_, t, map);
   const double end_speed =
       current_->spline.derivative().evaluate(std::max(0.0, current_->spline.duration() - 1e-6)).norm();
   const bool runs_out = !current_->ends_at_goal && end_speed > config_.stopped_speed_mps &&
-                        current_->endTime() - t <= stop_time;
+                        current_->endTime() - t <= stopTimeLocked(t, config_.brake_acc_mps2);
   if (hit >= 0.0) collision_ahead_ = true;
-  if (!runs_out && (hit < 0.0 || hit - t > stop_time)) return out;
+  if (!runs_out && (hit < 0.0 || hit - t > stopTimeLocked(t, collision_decel))) return out;
 
   emergencyStopLocked(t, map,
                       hit >= 0.0 ? "collision in " + std::to_string(hit - t) + " s"

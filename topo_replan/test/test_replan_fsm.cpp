@@ -427,6 +427,38 @@ TEST(ReplanFsm, ReplansWhenAnObstacleIsRevealedAhead) {
   EXPECT_GT(log.min_clearance, 0.2);
 }
 
+// A pillar on the line revealed about 1 s before the vehicle would come within the safety clearance
+// of it: too late for a stop at the emergency deceleration (brake_acc_mps2, 2.5 m/s^2: 0.8 s from
+// 2 m/s, plus the margin and the take-over delay), early enough for one at the back-up deceleration
+// every committed plan keeps (commit_brake_acc_mps2, 5 m/s^2). The FSM replans round it instead of
+// braking: a collision is an emergency only when that back-up stop could no longer end before it
+// (the way a tree seen at the edge of the camera's range meets a plan cut before unknown space).
+// With the back-up at 2.5 m/s^2 too, the same flight brakes.
+TEST(ReplanFsm, ReplansRoundAnObstacleTheBackupStopCanStillAvoid) {
+  Corridor before, after;
+  after.scene.box({10.0, 3.7, 0.0}, {10.3, 4.3, 3.0});
+  const EsdfMap& unknown = before.scene.finish();
+  const EsdfMap& revealed = after.scene.finish();
+  auto mapAt = [&](double, const Eigen::Vector3d& p) -> const EsdfMap& { return p.x() < 8.0 ? unknown : revealed; };
+  ReplanFsm::Config config = testConfig();
+  ASSERT_DOUBLE_EQ(config.brake_acc_mps2, 2.5);
+  config.commit_brake_acc_mps2 = config.max_brake_acc_mps2 = 5.0;  // the planner node's
+  auto fsm = makeFsm(config);
+  const FlightLog log = fly(fsm.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, mapAt, 800, revealed);
+  EXPECT_TRUE(log.goal_reached);
+  EXPECT_FALSE(log.braked);
+  bool collision_replan = false;
+  for (const FsmEvent& e : log.events) collision_replan = collision_replan || e.trigger == FsmEvent::Trigger::kCollisionAhead;
+  EXPECT_TRUE(collision_replan);
+  EXPECT_GT(log.min_clearance, config.safety_clearance_m);
+  expectContinuous(log.trajectories);
+
+  config.commit_brake_acc_mps2 = config.brake_acc_mps2;
+  auto cautious = makeFsm(config);
+  const FlightLog cautious_log = fly(cautious.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, mapAt, 800, revealed);
+  EXPECT_TRUE(cautious_log.braked);
+}
+
 // The plan observer (the planner node saves failed problems with it, debug/dump_failed_plans_dir)
 // sees every replanning call once, as the FSM judged it: the status of its event, the request it
 // planned from. A wall closes the corridor, so plans fail before the vehicle stops.
@@ -1553,7 +1585,7 @@ TEST(ReplanFsm, HoldsAtTheMeasuredPositionAfterAnOdometryJump) {
   const ExecTrajectory &before = log.trajectories[jump - 1], &brake = log.trajectories[jump];
   EXPECT_LE(brake.start_time_s, 3.0 + 0.1);
   const double tau = brake.start_time_s - before.start_time_s;
-  // Re-anchored by the jump, with the commanded velocity.
+  // Re-anchored by the jump, with the measured velocity (here the commanded one).
   EXPECT_NEAR((brake.spline.evaluate(0.0) - before.spline.evaluate(tau)).y(), 1.0, 0.05);
   EXPECT_LT((brake.spline.derivative().evaluate(0.0) - before.spline.derivative().evaluate(tau)).norm(), 1e-6);
   // Later trajectories join without steps.
@@ -1564,6 +1596,51 @@ TEST(ReplanFsm, HoldsAtTheMeasuredPositionAfterAnOdometryJump) {
   auto blind = makeFsm(config);
   const FlightLog blind_log = fly(blind.get(), {1, 4, 1.5}, {{22, 4, 1.5}}, always(map), 120, map, faults);
   EXPECT_FALSE(blind_log.braked);
+}
+
+// The odometry comes back from a blackout with the vehicle 0.7 m behind the commanded position and
+// backing up at 0.8 m/s (a flight controller's failsafe hold pulled it back while the planner saw
+// nothing): the FSM re-anchors from the measured state, its velocity included, and the vehicle,
+// following that stop, is not re-anchored a second time. (From the commanded velocity the stop ran
+// forward while the vehicle backed up; the second re-anchoring was a setpoint jump, bench-faults.)
+TEST(ReplanFsm, ReanchorsFromTheMeasuredVelocityAfterAnOdometryBlackout) {
+  Corridor c;
+  const EsdfMap& map = c.scene.finish();
+  auto fsm = makeFsm();
+  PerfectVehicle vehicle{{1, 4, 1.5}, Eigen::Vector3d::Zero(), {}};
+  ASSERT_TRUE(fsm->setOdometry(0.0, vehicle.position, vehicle.velocity));
+  fsm->setDepthFused(0.0);
+  ASSERT_EQ(fsm->setGoals({{22, 4, 1.5}}), GoalStatus::kAccepted);
+  const double dt = 0.05;
+  double t = 0.0;
+  for (; t < 3.0; t += dt) {
+    vehicle.follow(*fsm, t);
+    fsm->setOdometry(t, vehicle.position, vehicle.velocity);
+    fsm->setDepthFused(t);
+    fsm->checkSafety(t, map);
+    fsm->tick(t, map);
+  }
+  vehicle.follow(*fsm, t);
+  ASSERT_GT(vehicle.velocity.x(), 1.0);
+  const Eigen::Vector3d measured_v(-0.8, 0.0, 0.0), measured_p = vehicle.position - Eigen::Vector3d(0.7, 0.0, 0.0);
+  ASSERT_TRUE(fsm->setOdometry(t, measured_p, measured_v));
+  fsm->setDepthFused(t);
+  const FsmOutput out = fsm->checkSafety(t, map);
+  ASSERT_TRUE(out.trajectory);
+  ASSERT_TRUE(out.odometry_jumped);
+  EXPECT_TRUE(out.trajectory->reanchor);
+  EXPECT_LT((out.trajectory->spline.evaluate(0.0) - measured_p).norm(), 1e-6);
+  EXPECT_LT((out.trajectory->spline.derivative().evaluate(0.0) - measured_v).norm(), 1e-3);
+  // The vehicle follows the stop from its measured state: no second re-anchoring.
+  PerfectVehicle anchored{measured_p, measured_v, {}};
+  int reanchors = 0;
+  for (double s = t + dt; s < t + 2.0; s += dt) {
+    anchored.follow(*fsm, s);
+    fsm->setOdometry(s, anchored.position, anchored.velocity);
+    fsm->setDepthFused(s);
+    for (const FsmOutput& o : {fsm->checkSafety(s, map), fsm->tick(s, map)}) reanchors += o.odometry_jumped ? 1 : 0;
+  }
+  EXPECT_EQ(reanchors, 0);
 }
 
 // The same jump, with the map forgotten (the planner node's clear_map_on_odom_jump): the stop from

@@ -16,7 +16,8 @@
 //   REPLAN_TRAJ     planning from the state on the current trajectory at the time the new one takes
 //                   over (now + a takeover delay that adapts to the planning time); on failure the current one is kept while it is
 //                   safe and planning is retried every tick
-//   EMERGENCY_STOP  no safe trajectory and a collision closer than the braking distance, a stale
+//   EMERGENCY_STOP  no safe trajectory and a collision closer than the stop at the back-up
+//                   deceleration (commit_brake_acc_mps2 with the known-space commitment) needs, a stale
 //                   input (depth, odometry), or odometry that jumped away from the commanded state:
 //                   a braking trajectory (constant deceleration along the current trajectory's path,
 //                   at brake_acc_mps2, harder up to max_brake_acc_mps2 when that would not stop in
@@ -277,7 +278,11 @@ class ReplanFsm {
     /// its own position nor beside it. Not around every plan's start: plans would creep into
     /// unobserved space by this much each [m].
     double known_start_radius_m = 0.3;
-    double commit_margin_m = 0.1;       ///< the committed stop ends this far before unknown space [m]
+    /// The committed stop ends this far before unknown space [m]. At least a voxel more than 0.1 m:
+    /// the interpolated ESDF reads an obstacle up to half a voxel's diagonal closer than its voxel, so
+    /// one seen just past the edge of the known space came within the safety clearance of a stop
+    /// that ended 0.1 m before it (a collision ahead, and an emergency stop, at every such tree).
+    double commit_margin_m = 0.2;
     /// The deceleration of the committed stop (the back-up every published plan keeps): how late a
     /// plan may start stopping before unknown space. Up to max_brake_acc_mps2, the vehicle's limit;
     /// it is flown only when no new plan takes over in time [m/s^2].
@@ -439,10 +444,10 @@ class ReplanFsm {
   /// The trajectory flown at t: the current one, or the one it replaced before its start; null if none.
   const ExecTrajectory* flownAtLocked(double t) const;
   double referenceTimeAtLocked(double t) const;
-  /// Time to stop from the commanded speed at t at brake_acc_mps2, plus the emergency margin and the
+  /// Time to stop from the commanded speed at t at `deceleration`, plus the emergency margin and the
   /// takeover delay: a collision (or the end of a trajectory that ends moving) closer than this
   /// cannot wait for a replan.
-  double stopTimeLocked(double t) const;
+  double stopTimeLocked(double t, double deceleration) const;
   /// First time >= t at which the trajectory comes closer than safety_clearance_m; -1 if none.
   double firstCollisionTime(const ExecTrajectory& traj, double t, const EsdfMap& map) const;
   /// Stops from the state at t: along the current trajectory's path (checked space) when there is one,
