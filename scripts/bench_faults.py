@@ -16,7 +16,8 @@ OUT/bench_faults/<name>_faults.json before the flight; the monitor's files are t
 
 A fault counts as handled when its flight had no collision, no setpoint jump (a step over
 |v| dt + 5 cm that is not a re-anchoring), the worst commanded deceleration within
-max_brake_acc + margin (5 + 1 m/s^2), and completed its mission (every goal reached) once the fault
+max_brake_acc + margin (5 + 1 m/s^2; not across a re-anchoring, which sets the command to the
+measured state, velocity included), and completed its mission (every goal reached) once the fault
 cleared. Writes OUT/bench_faults.md (a table per fault kind, the control, one row per flight) and
 ends with one line:
   RESULT flights=... faults_injected=... collisions=... setpoint_jumps=... missions_completed_rate=...
@@ -336,7 +337,8 @@ def main(argv):
           f'{"" if args.no_control else ", and the same flights without faults as the control"}. A fault is handled '
           f'when its flight had no collision, no setpoint jump (a step over |v| dt + 5 cm that is not a re-anchoring '
           f'onto the measured state), a worst commanded deceleration within {MAX_BRAKE_ACC_MPS2:.0f} + '
-          f'{DECEL_MARGIN_MPS2:.0f} m/s^2, and completed its mission. Minimum clearance: body centre to the nearest '
+          f'{DECEL_MARGIN_MPS2:.0f} m/s^2 (not across a re-anchoring, which sets the command to the measured '
+          f'state, velocity included), and completed its mission. Minimum clearance: body centre to the nearest '
           f'occupied voxel of the true map (body radius 0.15 m).', '']
     md += kind_table(faulted, control)
     md += ['', '## Flights', '']

@@ -146,6 +146,7 @@ void SetpointWatch::addSetpoint(const SetpointSample& s) {
   if (restart) history_.clear();
 
   // The step from the previous setpoint.
+  bool reanchored = false;
   if (have_previous_) {
     const double dt = restart ? 0.0 : s.t_s - previous_.t_s;
     const double motion = std::max(previous_.velocity_mps.norm(), speed) * dt;
@@ -175,6 +176,7 @@ void SetpointWatch::addSetpoint(const SetpointSample& s) {
       }
       if (st.reanchoring) {
         ++stats_.reanchorings;
+        reanchored = true;
       } else {
         ++stats_.jumps;
         stats_.max_excess_m = std::max(stats_.max_excess_m, step.norm() - st.allowed_m);
@@ -183,7 +185,9 @@ void SetpointWatch::addSetpoint(const SetpointSample& s) {
     }
   }
 
-  // The finite difference of the velocity against the newest setpoint at least finite_difference_s older.
+  // The finite difference of the velocity against the newest setpoint at least finite_difference_s older
+  // (none across a re-anchoring: its velocity step is the command meeting the measured state).
+  if (reanchored) history_.clear();
   while (!history_.empty() && s.t_s - history_.front().t_s > config_.max_finite_difference_s) history_.pop_front();
   for (auto it = history_.rbegin(); it != history_.rend(); ++it) {
     const double dt = s.t_s - it->t_s;

@@ -589,6 +589,33 @@ TEST(SetpointWatch, VelocityStepShowsInTheFiniteDifference) {
   EXPECT_LE(w.stats().max_decel_t_s, 1.05 + 1e-9);
 }
 
+// A re-anchoring after an odometry blackout sets the command to the measured state, velocity
+// included (3 m/s ahead to 0.8 m/s back: the vehicle held on its own meanwhile). Neither its position
+// step nor its velocity step counts; the same velocity step without the re-anchoring is a
+// deceleration of (3 + 0.8) / 0.05 m/s^2.
+TEST(SetpointWatch, AReanchoringIsNeitherAJumpNorADeceleration) {
+  for (const bool blackout : {true, false}) {
+    SetpointWatch w;
+    double x = 0.0;
+    for (int i = 0; i < 100; ++i) {
+      w.addSetpoint(setpoint(i * kSetpointDt, Eigen::Vector3d(x, 0, 1), Eigen::Vector3d(3, 0, 0)));
+      x += 3.0 * kSetpointDt;
+    }
+    const Eigen::Vector3d measured(x - 0.7, 0, 1);
+    if (blackout) w.addOdometryReturn(1.0 - kSetpointDt);
+    w.setMeasuredPosition(measured);
+    for (int i = 100; i < 120; ++i)
+      w.addSetpoint(setpoint(i * kSetpointDt, measured + Eigen::Vector3d(-0.8 * (i - 100) * kSetpointDt, 0, 0),
+                             Eigen::Vector3d(-0.8, 0, 0)));
+    EXPECT_EQ(w.stats().reanchorings, blackout ? 1 : 0);
+    EXPECT_EQ(w.stats().jumps, blackout ? 0 : 1);
+    if (blackout)
+      EXPECT_LT(w.stats().max_decel_mps2, 1e-9);
+    else
+      EXPECT_NEAR(w.stats().max_decel_mps2, 3.8 / 0.05, 1e-6);
+  }
+}
+
 // Random streams with inserted steps, against the definition evaluated pair by pair.
 TEST(SetpointWatch, JumpsMatchTheDefinitionOnRandomStreams) {
   std::mt19937 rng(11);

@@ -130,7 +130,9 @@ struct SetpointStep {
 ///  - the deceleration is the commanded acceleration against the commanded velocity (above
 ///    min_speed_mps), the acceleration its norm; each also from the finite difference of the
 ///    commanded velocity over at least finite_difference_s (a velocity step shows there, not in the
-///    acceleration field), the worse of the two counting.
+///    acceleration field), the worse of the two counting; not across a re-anchoring, which sets the
+///    command to the measured state, velocity included (the vehicle does not change speed there;
+///    the command meets it).
 /// A setpoint older than the previous one (a ROS time step the caller could not remove) is a new
 /// start: no step allowance beyond the margin, no finite difference across it. One caller.
 class SetpointWatch {
