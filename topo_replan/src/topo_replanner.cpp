@@ -301,12 +301,25 @@ bool TopoReplanner::profileTimedSegment(const PolynomialTrajectory& ref, const F
   }
   const double speed0 = start.velocity.norm();
   const double join_m = std::clamp(0.5 + 0.5 * speed0, 1.0, 3.0);
+  const double a = config_.optimizer.max_acc_mps2 * config_.optimizer.feasibility_margin;
+  // The cap at the reference's time t: its own speed where it keeps or loses speed (a corner, the
+  // goal); where it gains speed, what the curvature allows at the acceleration limit (|v x a| / |v|^3
+  // of the reference): its gain is its own start from rest, and a vehicle already faster (a replan
+  // after a stop, a mission started from a hover earlier) was held to it.
+  auto capAt = [&](double t) -> double {
+    const Eigen::Vector3d v = ref.velocity(t), acc = ref.acceleration(t);
+    const double speed = v.norm();
+    if (!(speed > 1e-6) || acc.dot(v) / speed <= 0.1) return speed;
+    if (speed < 0.3) return INFINITY;  // from rest: the forward pass from the start's speed limits it
+    const double kappa = v.cross(acc).norm() / (speed * speed * speed);
+    return std::max(speed, kappa > 1e-9 ? std::sqrt(a / kappa) : INFINITY);
+  };
   size_t j = 0;
   while (j + 1 < ref_p.size() && (ref_p[j] - start.position).norm() < join_m) ++j;
   std::vector<Point> path{{start.position, 0.0, INFINITY}};
   const Eigen::Vector3d to_join = ref_p[j] - start.position;
   const double L = to_join.norm();
-  const double join_cap = ref.velocity(ref_t[j]).norm();
+  const double join_cap = capAt(ref_t[j]);
   if (L > 1e-3) {
     const Eigen::Vector3d m0 = (speed0 > 0.1 ? Eigen::Vector3d(start.velocity / speed0) : Eigen::Vector3d(to_join / L)) * L;
     const Eigen::Vector3d ref_dir = ref.velocity(ref_t[j]);
@@ -320,10 +333,9 @@ bool TopoReplanner::profileTimedSegment(const PolynomialTrajectory& ref, const F
     }
   }
   for (size_t k = j + 1; k < ref_p.size(); ++k)
-    path.push_back({ref_p[k], path.back().s + (ref_p[k] - path.back().p).norm(), ref.velocity(ref_t[k]).norm()});
+    path.push_back({ref_p[k], path.back().s + (ref_p[k] - path.back().p).norm(), capAt(ref_t[k])});
   const size_t n = path.size();
   if (n < 2 || !(path.back().s > 1e-6)) return false;
-  const double a = config_.optimizer.max_acc_mps2 * config_.optimizer.feasibility_margin;
   const double vmax = cruiseSpeed();
   std::vector<double> v(n);
   v[n - 1] = std::min(vmax, path[n - 1].cap);
@@ -349,9 +361,11 @@ bool TopoReplanner::profileTimedSegment(const PolynomialTrajectory& ref, const F
     points.push_back(path[i - 1].p + f * (path[i].p - path[i - 1].p));
   }
   points.back() = path.back().p;
-  // Arriving no faster than the reference, and no faster than the pass allows from this start.
+  // Arriving at the pass's speed along the reference: no faster than the pass allows from this start,
+  // and faster than the reference where it still gains speed from its own start and the vehicle is
+  // ahead of it.
   const Eigen::Vector3d ref_velocity = ref.velocity(t_g);
-  if (ref_velocity.norm() > 1e-6 && v[n - 1] < ref_velocity.norm() - 1e-3) {
+  if (ref_velocity.norm() > 1e-6 && std::abs(v[n - 1] - ref_velocity.norm()) > 1e-3) {
     *goal_velocity = ref_velocity * (v[n - 1] / ref_velocity.norm());
     goal_acceleration->setZero();
   } else {

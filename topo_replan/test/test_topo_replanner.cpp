@@ -609,5 +609,41 @@ TEST(TopoReplanner, TheLocalSegmentIsTimedFromTheVehiclesSpeed) {
   }
 }
 
+// profile_timing, the other way: a vehicle faster than the reference where the reference is still
+// gaining speed from its own start from rest (a mission restarted, a replan after a stop) is not
+// slowed to the reference's ramp. The reference's own speed caps the segment only where it keeps or
+// loses speed (corners, the goal); where it gains speed, its curvature does.
+TEST(TopoReplanner, TheLocalSegmentIsNotHeldToTheReferencesStartFromRest) {
+  SyntheticScene scene({30.0, 8.0, 3.0});
+  const EsdfMap& map = scene.finish();
+  ReferenceConfig rc;
+  rc.max_vel_mps = 5.0;
+  rc.max_acc_mps2 = 2.5;
+  rc.max_segment_length_m = 3.0;
+  rc.profile_timing = true;
+  PolynomialTrajectory ref;
+  ASSERT_EQ(referenceTrajectory({{2, 4, 1.5}, {28, 4, 1.5}}, FlatState::atRest({2, 4, 1.5}), FlatState::atRest({28, 4, 1.5}), rc,
+                                &ref),
+            TrajectoryStatus::kSuccess);
+  ReplanRequest req = requestAlong(ref, 0.5);
+  ASSERT_LT(req.start.velocity.norm(), 2.0);
+  req.start.velocity = Eigen::Vector3d(3.0, 0.0, 0.0);  // the vehicle is faster than the ramp
+  req.start.acceleration.setZero();
+  TopoReplanner::Config c = deterministicConfig(1);
+  c.optimizer.max_vel_mps = 5.0;
+  c.optimizer.max_acc_mps2 = 2.5;
+  c.profile_timing = true;
+  std::string err;
+  auto r = TopoReplanner::create(c, &err);
+  ASSERT_TRUE(r) << err;
+  const LocalProblem lp = r->localProblem(map, req);
+  ASSERT_EQ(lp.status, ReplanStatus::kSuccess) << lp.message;
+  const UniformBspline vel = lp.initial.derivative();
+  double slowest = INFINITY;
+  for (double t = 0.0; t <= std::min(2.0, lp.initial.duration()); t += 0.01) slowest = std::min(slowest, vel.evaluate(t).norm());
+  std::printf("faster than the reference's ramp: slowest %.2f m/s in the first 2 s (from 3.00)\n", slowest);
+  EXPECT_GT(slowest, 2.8);
+}
+
 }  // namespace
 }  // namespace topo_planner

@@ -172,7 +172,9 @@ class TopoReplanner {
     double control_point_spacing_m = 0.35;  ///< initial spline: about one control point per this [m]
     /// The initial spline's timing. false: the reference's own (the paper's: the local segment is the
     /// reference between the two times). true: along the same path, the fastest speed within the
-    /// reference's own speed at each point, from the start's speed at the optimiser's acceleration
+    /// reference's own speed at each point where the reference keeps or loses speed (a corner, the
+    /// goal), and within what its curvature allows where it gains speed (its own start from rest: a
+    /// faster vehicle is not held to that ramp), from the start's speed at the optimiser's acceleration
     /// (feasibility_margin of it): a vehicle slower than the reference's timing (it started late, it
     /// slowed for an obstacle) is not asked to catch up with it, which asked for 22-220 m/s^2 at the
     /// start and stretched every candidate (time ratios of 1.3-1.6 at 5 m/s in the open).
