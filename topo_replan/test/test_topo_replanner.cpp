@@ -555,6 +555,22 @@ TEST(TopoReplanner, TheSmoothestAmongTheFastestIsChosen) {
 namespace topo_planner {
 namespace {
 
+// A 26 m straight reference from rest to rest at up to 5 m/s and 2.5 m/s^2, cruise-timed or
+// profile-timed (the planner node's).
+PolynomialTrajectory fastStraightReference(bool profile_timing) {
+  ReferenceConfig rc;
+  rc.max_vel_mps = 5.0;
+  rc.max_acc_mps2 = 2.5;
+  rc.max_segment_length_m = 3.0;
+  rc.cruise_timing = !profile_timing;
+  rc.profile_timing = profile_timing;
+  PolynomialTrajectory ref;
+  EXPECT_EQ(referenceTrajectory({{2, 4, 1.5}, {28, 4, 1.5}}, FlatState::atRest({2, 4, 1.5}), FlatState::atRest({28, 4, 1.5}),
+                                rc, &ref),
+            TrajectoryStatus::kSuccess);
+  return ref;
+}
+
 // profile_timing: a vehicle slower than the reference's timing (it started late, it slowed for an
 // obstacle) is not asked to catch up with it. From 1.5 m/s on a reference cruising at 5 m/s, the
 // reference's own timing asks for a jump in speed at the start; the profile-timed segment starts
@@ -562,15 +578,7 @@ namespace {
 TEST(TopoReplanner, TheLocalSegmentIsTimedFromTheVehiclesSpeed) {
   SyntheticScene scene({30.0, 8.0, 3.0});
   const EsdfMap& map = scene.finish();
-  ReferenceConfig rc;
-  rc.max_vel_mps = 5.0;
-  rc.max_acc_mps2 = 2.5;
-  rc.max_segment_length_m = 3.0;
-  rc.cruise_timing = true;
-  PolynomialTrajectory ref;
-  ASSERT_EQ(referenceTrajectory({{2, 4, 1.5}, {28, 4, 1.5}}, FlatState::atRest({2, 4, 1.5}), FlatState::atRest({28, 4, 1.5}), rc,
-                                &ref),
-            TrajectoryStatus::kSuccess);
+  const PolynomialTrajectory ref = fastStraightReference(false);
   double fastest = 0.0;  // where the reference cruises fastest
   for (double t = 0.0; t < ref.duration() / 2.0; t += 0.01)
     if (ref.velocity(t).norm() > ref.velocity(fastest).norm()) fastest = t;
@@ -616,15 +624,7 @@ TEST(TopoReplanner, TheLocalSegmentIsTimedFromTheVehiclesSpeed) {
 TEST(TopoReplanner, TheLocalSegmentIsNotHeldToTheReferencesStartFromRest) {
   SyntheticScene scene({30.0, 8.0, 3.0});
   const EsdfMap& map = scene.finish();
-  ReferenceConfig rc;
-  rc.max_vel_mps = 5.0;
-  rc.max_acc_mps2 = 2.5;
-  rc.max_segment_length_m = 3.0;
-  rc.profile_timing = true;
-  PolynomialTrajectory ref;
-  ASSERT_EQ(referenceTrajectory({{2, 4, 1.5}, {28, 4, 1.5}}, FlatState::atRest({2, 4, 1.5}), FlatState::atRest({28, 4, 1.5}), rc,
-                                &ref),
-            TrajectoryStatus::kSuccess);
+  const PolynomialTrajectory ref = fastStraightReference(true);
   ReplanRequest req = requestAlong(ref, 0.5);
   ASSERT_LT(req.start.velocity.norm(), 2.0);
   req.start.velocity = Eigen::Vector3d(3.0, 0.0, 0.0);  // the vehicle is faster than the ramp
