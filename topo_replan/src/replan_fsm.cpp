@@ -619,6 +619,10 @@ ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::s
   FlatState s0 = from ? *from : takeoverStateLocked(t);
   if (!current_ && !from) s0.velocity = odom_velocity_;
   const double speed = s0.velocity.norm();
+  // Nearly at rest: a hold where it is, from the commanded velocity and acceleration (the end of a
+  // stop still decelerating), so neither steps.
+  const Eigen::Vector3d creep = s0.velocity;
+  if (speed < 0.05) s0.velocity.setZero();
   // Along the current trajectory's path, which was checked when it was published: a stop on a curve
   // stays on the curve instead of leaving it along the tangent. Without one (or from another state),
   // along the velocity.
@@ -633,11 +637,10 @@ ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::s
   auto brakeAt = [&](double a) {
     std::vector<Eigen::Vector3d> points;
     double interval = 0.1;
-    Eigen::Vector3d start_acc = Eigen::Vector3d::Zero();
+    Eigen::Vector3d start_acc = Eigen::Vector3d::Zero(), start_vel = s0.velocity;
     if (speed < 0.05) {
-      // Nearly at rest: a hold where it is, from the commanded velocity and acceleration (the end
-      // of a stop still decelerating), so neither steps.
       points.assign(4, s0.position);
+      start_vel = creep;
       start_acc = s0.acceleration;
     } else if (path) {
       // From the flown acceleration (the curve's included): no step in the commanded acceleration.
@@ -656,7 +659,7 @@ ExecTrajectory ReplanFsm::brakingTrajectory(double t, const EsdfMap& map, std::s
     ExecTrajectory brake;
     brake.start_time_s = t;
     brake.braking = true;
-    if (!UniformBspline::fitToPoints(points, interval, s0.velocity, start_acc, Eigen::Vector3d::Zero(),
+    if (!UniformBspline::fitToPoints(points, interval, start_vel, start_acc, Eigen::Vector3d::Zero(),
                                      Eigen::Vector3d::Zero(), 3, &brake.spline)) {
       // Only for a degenerate state; hold the position instead (a spline of equal points).
       brake.spline = UniformBspline::straightLine(s0.position, s0.position, 6, 3, 0.1);
