@@ -338,7 +338,12 @@ FusionResult OccupancyMap::fuseDepthImage(const DepthImageView& image, const Pin
       ++valid;
       const bool hit = length <= max_len;
       if (!hit) length = max_len;
-      castRay(origin, origin + R * (ray * (length / len_per_depth)), hit, &result);
+      const Eigen::Vector3d end = origin + R * (ray * (length / len_per_depth));
+      if (config_.project_free_space) {
+        markRayEnd(origin, end, hit, &result);
+      } else {
+        castRay(origin, end, hit, &result);
+      }
     }
   }
   if (valid == 0) {
@@ -351,8 +356,123 @@ FusionResult OccupancyMap::fuseDepthImage(const DepthImageView& image, const Pin
     result.status = MapStatus::kOutOfMap;
     return result;
   }
+  if (config_.project_free_space) projectFreeSpace(image, camera, T_world_camera);
   applyFrame(&result);
   return result;
+}
+
+void OccupancyMap::markRayEnd(const Eigen::Vector3d& origin, const Eigen::Vector3d& end, bool is_hit,
+                              FusionResult* result) {
+  if (!origin.allFinite() || !end.allFinite()) return;
+  if (!geometry_.inWindow(end)) {
+    // Only whether it meets the window (its free part, projected): a ray all outside is not one.
+    const double eps = 1e-6 * geometry_.resolution();
+    double t0, t1;
+    if (clipSegmentToBox(origin, end, geometry_.windowMin().array() + eps, geometry_.windowMax().array() - eps, &t0, &t1))
+      ++result->rays;
+    return;
+  }
+  ++result->rays;
+  if (!is_hit) return;
+  const Eigen::Vector3i idx = geometry_.indexOf(end);
+  const size_t addr = geometry_.address(idx);
+  const uint32_t mark_hit = (frame_ << 1) | 1u;
+  if (stamp_[addr] == mark_hit) return;
+  stamp_[addr] = mark_hit;
+  touched_.push_back({addr, idx});
+}
+
+void OccupancyMap::projectFreeSpace(const DepthImageView& image, const PinholeCamera& camera,
+                                    const Eigen::Isometry3d& T_world_camera) {
+  const Eigen::Matrix3d R = T_world_camera.linear();
+  const Eigen::Vector3d origin = T_world_camera.translation();
+  const double max_len = config_.max_ray_length_m, min_len = config_.min_ray_length_m, res = geometry_.resolution();
+  // The view's bounding box: the camera and a 5 x 5 grid of directions over the image at max range,
+  // padded by the sphere's bulge between them (under 3% of the range for views up to 120 degrees).
+  Eigen::Vector3d lo = origin, hi = origin;
+  for (int i = 0; i <= 4; ++i)
+    for (int j = 0; j <= 4; ++j) {
+      const Eigen::Vector3d ray(((camera.width - 1) * i / 4.0 - camera.cx) / camera.fx,
+                                ((camera.height - 1) * j / 4.0 - camera.cy) / camera.fy, 1.0);
+      const Eigen::Vector3d p = origin + R * (ray * (max_len / ray.norm()));
+      lo = lo.cwiseMin(p);
+      hi = hi.cwiseMax(p);
+    }
+  const double pad = 0.05 * max_len + res;
+  lo.array() -= pad;
+  hi.array() += pad;
+  if (!lo.allFinite() || !hi.allFinite()) return;
+  // Clipped to the window (in double first: a huge box would overflow the int indices).
+  lo = lo.cwiseMax(geometry_.windowMin());
+  hi = hi.cwiseMin(geometry_.windowMax() - Eigen::Vector3d::Constant(1e-6 * res));
+  if ((lo.array() > hi.array()).any()) return;
+  const Eigen::Vector3i ilo = geometry_.indexOf(lo), ihi = geometry_.indexOf(hi);
+
+  const uint32_t mark_free = frame_ << 1, mark_hit = mark_free | 1u;
+  const Eigen::Matrix3d Rt = R.transpose();
+  const Eigen::Vector3d step_x = Rt * Eigen::Vector3d(res, 0.0, 0.0);
+  const double max_len2 = max_len * max_len;
+  const int w = camera.width, h = camera.height;
+  // A pixel's depth when it is a valid measurement (no return: +inf); NaN otherwise.
+  auto measured = [&](int u, int v) {
+    const double d = image.depthAt(u, v);
+    if (std::isnan(d) || d <= 0.0) return std::numeric_limits<double>::quiet_NaN();
+    if (std::isinf(d)) return d;
+    const double x = (u - camera.cx) / camera.fx, y = (v - camera.cy) / camera.fy;
+    return d * std::sqrt(x * x + y * y + 1.0) < min_len ? std::numeric_limits<double>::quiet_NaN() : d;
+  };
+  Eigen::Vector3i i;
+  for (i.z() = ilo.z(); i.z() <= ihi.z(); ++i.z())
+    for (i.y() = ilo.y(); i.y() <= ihi.y(); ++i.y()) {
+      i.x() = ilo.x();
+      const Eigen::Vector3d pc0 = Rt * (geometry_.centerOf(i) - origin);  // voxel centre, camera frame
+      // The row's voxels k = 0, 1, ... at pc0 + k step_x: the image's four edges and the depth's
+      // sign are linear in k (A + B k >= 0), so the ones in view are an interval.
+      double k_lo = 0.0, k_hi = ihi.x() - ilo.x();
+      auto keep = [&](double A, double B) {
+        if (std::abs(B) < 1e-12) {
+          if (A < 0.0) k_hi = -1.0;
+        } else if (B > 0.0) {
+          k_lo = std::max(k_lo, -A / B);
+        } else {
+          k_hi = std::min(k_hi, -A / B);
+        }
+      };
+      keep(pc0.z() - 1e-6, step_x.z());
+      keep(camera.fx * pc0.x() + camera.cx * pc0.z(), camera.fx * step_x.x() + camera.cx * step_x.z());
+      keep(-(camera.fx * pc0.x() + (camera.cx - (w - 1)) * pc0.z()),
+           -(camera.fx * step_x.x() + (camera.cx - (w - 1)) * step_x.z()));
+      keep(camera.fy * pc0.y() + camera.cy * pc0.z(), camera.fy * step_x.y() + camera.cy * step_x.z());
+      keep(-(camera.fy * pc0.y() + (camera.cy - (h - 1)) * pc0.z()),
+           -(camera.fy * step_x.y() + (camera.cy - (h - 1)) * step_x.z()));
+      if (!(k_lo <= k_hi)) continue;
+      const int k0 = std::max(0, int(std::ceil(k_lo)) - 1), k1 = std::min(ihi.x() - ilo.x(), int(std::floor(k_hi)) + 1);
+      i.x() = ilo.x() + k0;
+      Eigen::Vector3d pc = pc0 + double(k0) * step_x;
+      for (; i.x() <= ilo.x() + k1; ++i.x(), pc += step_x) {
+        if (pc.z() <= 1e-6 || pc.squaredNorm() > max_len2) continue;
+        const double uf = camera.fx * pc.x() / pc.z() + camera.cx, vf = camera.fy * pc.y() / pc.z() + camera.cy;
+        if (!(uf >= 0.0 && uf <= w - 1 && vf >= 0.0 && vf <= h - 1)) continue;
+        // The nearest surface on the (up to) four pixels around the projection (a voxel on an
+        // edge's near side is not freed by the background seen past it), at least half a voxel
+        // behind the centre (a voxel a surface runs through, seen too obliquely for a hit in it,
+        // is not freed either).
+        const int u0 = int(uf), v0 = int(vf), u1 = std::min(u0 + 1, w - 1), v1 = std::min(v0 + 1, h - 1);
+        double nearest = INFINITY;
+        bool any = false;
+        for (const double d : {measured(u0, v0), measured(u1, v0), measured(u0, v1), measured(u1, v1)})
+          if (!std::isnan(d)) {
+            any = true;
+            nearest = std::min(nearest, d);
+          }
+        if (!any || pc.z() > nearest - 0.5 * res) continue;
+        const size_t addr = geometry_.address(i);
+        uint32_t& s = stamp_[addr];
+        if (s == mark_free || s == mark_hit) continue;  // once a frame; hits win
+        s = mark_free;
+        touched_.push_back({addr, i});
+      }
+    }
 }
 
 FusionResult OccupancyMap::fusePointCloud(const std::vector<Eigen::Vector3d>& points_world,

@@ -91,6 +91,89 @@ TEST(DepthFusion, BoxFacesOccupiedRaysFreeBehindUnknown) {
   EXPECT_LE(r.touched_box.max.x(), 45);
 }
 
+// One frame of open space from a hover: every voxel wholly in view and in range is seen. Merged
+// rays (project_free_space false, the ray casting point clouds keep) left a third to a half of them
+// unknown, the same ones every frame: a vehicle at rest waited on space it had in view.
+TEST(DepthFusion, OneFrameSeesEveryVoxelInView) {
+  const PinholeCamera cam;  // 640 x 480, as the simulated and the real camera
+  Eigen::Isometry3d T = test::cameraLookingAlongX({0.013, 0.027, 1.004});
+  const std::vector<float> open(size_t(cam.width) * cam.height, INFINITY);
+  for (const bool projective : {true, false}) {
+    OccupancyMap::Config c;
+    c.size_m = {8.0, 10.0, 5.0};
+    c.origin_m = {-1.0, -5.0, -1.5};
+    c.project_free_space = projective;
+    std::string err;
+    auto map = OccupancyMap::create(c, &err);
+    ASSERT_TRUE(map) << err;
+    ASSERT_EQ(map->fuseDepthImage(test::viewOf(open, cam), cam, T).status, MapStatus::kSuccess);
+    int in_view = 0, unknown = 0;
+    const double half = 0.5 * c.resolution_m;
+    for (double x = -0.95; x < 7.0; x += 0.1)
+      for (double y = -4.95; y < 5.0; y += 0.1)
+        for (double z = -1.45; z < 3.5; z += 0.1) {
+          bool inside = true;
+          for (int k = 0; k < 8 && inside; ++k) {
+            const Eigen::Vector3d corner(x + (k & 1 ? half : -half), y + (k & 2 ? half : -half), z + (k & 4 ? half : -half));
+            const Eigen::Vector3d p = T.inverse() * corner;
+            const double u = cam.fx * p.x() / p.z() + cam.cx, v = cam.fy * p.y() / p.z() + cam.cy;
+            inside = p.z() > 0.05 && p.norm() < c.max_ray_length_m - 0.1 && u > 1 && u < cam.width - 2 && v > 1 &&
+                     v < cam.height - 2;
+          }
+          if (!inside) continue;
+          ++in_view;
+          unknown += map->state(Eigen::Vector3d(x, y, z)) == VoxelState::kUnknown;
+        }
+    ASSERT_GT(in_view, 20000);
+    if (projective) {
+      EXPECT_EQ(unknown, 0) << "of " << in_view;
+    } else {
+      EXPECT_GT(unknown, in_view / 5) << "merged rays: " << unknown << " of " << in_view << " unknown";
+    }
+  }
+}
+
+// Free space by projection frees no voxel of a surface's far side: not the box's inside, not its
+// shadow, not the voxels along its edges where the background is seen past it (the nearest surface
+// of the pixels around a voxel's projection decides).
+TEST(DepthFusion, ProjectionFreesNothingBehindASurface) {
+  for (const int skip : {1, 2}) {
+    auto map = sceneMap(skip);
+    const PinholeCamera cam = test::smallCamera();
+    const Eigen::Vector3d poses[2] = {kCamera, Eigen::Vector3d(0.3, 0.62, 1.37)};
+    for (const Eigen::Vector3d& at : poses) {
+      const auto T = test::cameraLookingAlongX(at);
+      const auto depth = test::renderBox(cam, T, kBoxLo, kBoxHi);
+      // (Three frames: one hit on an unknown voxel leaves it below prob_occupied.)
+      for (int frame = 0; frame < 3; ++frame)
+        ASSERT_EQ(map->fuseDepthImage(test::viewOf(depth, cam), cam, T).status, MapStatus::kSuccess);
+    }
+    int free = 0;
+    const double half = 0.05;
+    for (double x = -0.95; x < 5.0; x += 0.1)
+      for (double y = -2.95; y < 3.0; y += 0.1)
+        for (double z = -0.45; z < 2.5; z += 0.1) {
+          if (map->state(Eigen::Vector3d(x, y, z)) != VoxelState::kFree) continue;
+          ++free;
+          // The voxel's cube and the box's inside (its faces lie mid-voxel) do not meet.
+          const bool meets = x + half > kBoxLo.x() && x - half < kBoxHi.x() && y + half > kBoxLo.y() &&
+                             y - half < kBoxHi.y() && z + half > kBoxLo.z() && z - half < kBoxHi.z();
+          EXPECT_FALSE(meets) << "free voxel at " << x << " " << y << " " << z << " (skip " << skip << ")";
+          // Nor does it lie in the box's shadow from both poses (well inside it: 0.05 m off its edges).
+          auto shadowed = [&](const Eigen::Vector3d& from) {
+            const Eigen::Vector3d d = Eigen::Vector3d(x, y, z) - from;
+            const Eigen::Vector3d at_face = from + d * ((kBoxLo.x() - from.x()) / d.x());
+            return std::abs(at_face.y()) < 0.4 && std::abs(at_face.z() - 1.0) < 0.4;
+          };
+          if (x > kBoxHi.x()) {
+            EXPECT_FALSE(shadowed(poses[0]) && shadowed(poses[1]))
+                << "free voxel in the shadow at " << x << " " << y << " " << z;
+          }
+        }
+    EXPECT_GT(free, 1000);
+  }
+}
+
 TEST(DepthFusion, RepeatedFramesConverge) {
   auto map = sceneMap(2);
   const PinholeCamera cam = test::smallCamera();

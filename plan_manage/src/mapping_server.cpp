@@ -157,6 +157,7 @@ bool readMappingParams(const ros::NodeHandle& nh, MappingServer::Config* config)
   r.read("map/depth_pixel_skip", m.depth_pixel_skip);
   r.read("map/max_image_pixels", m.max_image_pixels);
   r.read("map/merge_rays", m.merge_rays);
+  r.read("map/project_free_space", m.project_free_space);
   r.read("map/max_memory_mb", m.max_memory_mb);
 
   EsdfMap::Config& e = c.esdf;

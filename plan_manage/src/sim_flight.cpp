@@ -339,6 +339,7 @@ bool loadSimFlightConfig(const std::string& config_dir, double max_vel_mps, doub
   if (!planner->has("fsm/sensing_range_m")) c.fsm.sensing_range_m = c.map.max_ray_length_m;  // as the planner node
   mapping->read("map/depth_pixel_skip", c.map.depth_pixel_skip);
   mapping->read("map/merge_rays", c.map.merge_rays);
+  mapping->read("map/project_free_space", c.map.project_free_space);
   mapping->read("esdf/max_distance_m", c.esdf.max_distance_m);
   mapping->read("esdf/inflate_radius_m", c.esdf.inflate_radius_m);
   mapping->read("esdf/num_threads", c.esdf.num_threads);

@@ -40,6 +40,7 @@ void fuzzMapping(FuzzInput& in) {
   m.depth_pixel_skip = in.integer(m.depth_pixel_skip);
   m.max_image_pixels = in.integer(m.max_image_pixels);
   m.merge_rays = in.flag();
+  m.project_free_space = in.flag();
   m.max_memory_mb = std::min(in.number(8.0), 8.0);  // the documented bound, kept below the RSS limit
   EsdfMap::Config& e = c.esdf;
   e.max_distance_m = in.number(e.max_distance_m);
