@@ -553,7 +553,10 @@ void ReplanFsm::replaceCurrentLocked(const ExecTrajectory& next) {
 
 const ExecTrajectory* ReplanFsm::flownAtLocked(double t) const {
   if (!current_) return nullptr;
-  if (previous_ && t < current_->start_time_s && previous_->start_time_s <= t) return &*previous_;
+  // Before the current one's start, the one it replaces: flown then, or (t a rounding error before
+  // its own start: 26.15 + 0.1 > 26.25) about to be. The current one, clamped to its later start,
+  // would put the state where the vehicle is only later (a stop from there stepped the setpoint).
+  if (previous_ && t < current_->start_time_s) return &*previous_;
   return &*current_;
 }
 

@@ -1525,14 +1525,27 @@ TEST(ReplanFsm, BrakesWhenOdometryStopsAndResumes) {
   EXPECT_NE(why.find("before the last"), std::string::npos) << why;
 }
 
+// Take-overs 0.4 s after planning starts: room for the odometry timeout (0.25 s) before them.
+ReplanFsm::Config lateTakeoverConfig() {
+  ReplanFsm::Config config = testConfig();
+  config.takeover_delay_s = 0.4;
+  config.max_takeover_delay_s = 0.5;
+  return config;
+}
+
+// One tick of a vehicle that follows the trajectories exactly and whose odometry arrives.
+void followAndCheck(ReplanFsm* fsm, PerfectVehicle* vehicle, double t, const EsdfMap& map) {
+  vehicle->follow(*fsm, t);
+  fsm->setOdometry(t, vehicle->position, vehicle->velocity);
+  fsm->checkSafety(t, map);
+}
+
 // A stop that comes after a plan was published but before it takes over starts from the trajectory
 // still being flown, not from the start of the one waiting (a setpoint jump of v x the delay).
 TEST(ReplanFsm, AStopBeforeAPendingTakeoverStartsFromTheTrajectoryFlown) {
   Corridor c;
   const EsdfMap& map = c.scene.finish();
-  ReplanFsm::Config config = testConfig();
-  config.takeover_delay_s = 0.4;  // room for the odometry timeout (0.25 s) before the takeover
-  config.max_takeover_delay_s = 0.5;
+  const ReplanFsm::Config config = lateTakeoverConfig();
   auto fsm = makeFsm(config);
   PerfectVehicle vehicle{Eigen::Vector3d(1, 4, 1.5), Eigen::Vector3d::Zero(), {}};
   ASSERT_TRUE(fsm->setOdometry(0.0, vehicle.position, vehicle.velocity));
@@ -1541,9 +1554,7 @@ TEST(ReplanFsm, AStopBeforeAPendingTakeoverStartsFromTheTrajectoryFlown) {
   double t = 0.0;
   for (int k = 0; k < 200 && !pending; ++k) {
     t = k * 0.05;
-    vehicle.follow(*fsm, t);
-    fsm->setOdometry(t, vehicle.position, vehicle.velocity);
-    fsm->checkSafety(t, map);
+    followAndCheck(fsm.get(), &vehicle, t, map);
     const std::optional<ExecTrajectory> before = fsm->current();
     const FsmOutput out = fsm->tick(t, map);
     if (out.trajectory && before && t > 2.0) flown = before, pending = out.trajectory;
@@ -1564,6 +1575,47 @@ TEST(ReplanFsm, AStopBeforeAPendingTakeoverStartsFromTheTrajectoryFlown) {
   const UniformBspline acc = out.trajectory->spline.derivative().derivative();
   for (double s = 0.0; s <= out.trajectory->spline.duration(); s += 0.005)
     ASSERT_LE(acc.evaluate(s).norm(), 1.1 * config.brake_acc_mps2) << "at " << s << " s";
+}
+
+// Two plans waiting for their take-overs (published on consecutive ticks), and a stop a hair before
+// the first one's start (a tick's time a rounding error short of it: 26.15 + 0.1 > 26.25): the stop
+// starts where that plan starts, the state the vehicle is in then. It started where the second
+// plan starts, 0.05 s further on: a setpoint step of 1.4 cm at 0.3 m/s in
+// DoesNotDescendBesideAFaceItHasNotSeen, 9.9 cm here at cruise.
+TEST(ReplanFsm, AStopJustBeforeATakeoverStartsFromThePlanAboutToBeFlown) {
+  Corridor c;
+  const EsdfMap& map = c.scene.finish();
+  const ReplanFsm::Config config = lateTakeoverConfig();
+  auto fsm = makeFsm(config);
+  PerfectVehicle vehicle{Eigen::Vector3d(1, 4, 1.5), Eigen::Vector3d::Zero(), {}};
+  ASSERT_TRUE(fsm->setOdometry(0.0, vehicle.position, vehicle.velocity));
+  const std::vector<Eigen::Vector3d> goals{{22, 4, 1.5}};
+  ASSERT_EQ(fsm->setGoals(goals), GoalStatus::kAccepted);
+  std::optional<ExecTrajectory> next, newest;  // the plan about to take over, and the one after it
+  double t = 0.0;
+  for (int k = 0; k < 200 && !newest; ++k) {
+    t = k * 0.05;
+    followAndCheck(fsm.get(), &vehicle, t, map);
+    const std::optional<ExecTrajectory> before = fsm->current();
+    // Once a plan waits for its take-over at cruise, the goals given again: planned at once.
+    const bool waiting = before && !before->manoeuvre() && before->start_time_s > t && t > 2.0;
+    if (waiting) ASSERT_EQ(fsm->setGoals(goals), GoalStatus::kAccepted);
+    const FsmOutput out = fsm->tick(t, map);
+    if (waiting && out.trajectory && !out.trajectory->manoeuvre()) next = before, newest = out.trajectory;
+  }
+  ASSERT_TRUE(newest);
+  // No odometry after t: stale a hair before `next` takes over, `newest` still waiting.
+  const double t_stop = std::nextafter(next->start_time_s, 0.0);
+  ASSERT_GT(t_stop - t, config.odom_timeout_s);
+  ASSERT_LT(t_stop, newest->start_time_s);
+  const double gap = (next->spline.evaluate(0.0) - newest->spline.evaluate(0.0)).norm();
+  ASSERT_GT(gap, 0.02);  // cruising: where they start differs
+  const FsmOutput out = fsm->checkSafety(t_stop, map);
+  ASSERT_TRUE(out.trajectory);
+  ASSERT_TRUE(out.trajectory->braking);
+  EXPECT_LT((out.trajectory->spline.evaluate(0.0) - next->spline.evaluate(0.0)).norm(), 1e-6)
+      << "the plans start " << gap << " m apart";
+  EXPECT_LT((out.trajectory->spline.derivative().evaluate(0.0) - next->spline.derivative().evaluate(0.0)).norm(), 1e-6);
 }
 
 // A 1 m odometry jump (VIO relocalisation) at cruise speed: the FSM holds at the measured position,
