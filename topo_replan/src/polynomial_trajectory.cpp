@@ -180,6 +180,18 @@ TrajectoryStatus minimumSnapTrajectory(const std::vector<Eigen::Vector3d>& waypo
   return TrajectoryStatus::kSuccess;
 }
 
+FlatState referenceStartState(const FlatState& vehicle, const Eigen::Vector3d& leg) {
+  FlatState start = vehicle;
+  const double speed = vehicle.velocity.norm(), length = leg.norm();
+  if (!(length > 1e-9) || !std::isfinite(length)) return start;
+  const Eigen::Vector3d dir = leg / length;
+  const double along = vehicle.velocity.dot(dir);
+  if (along >= 0.95 * speed) return start;  // along the leg (cos 18 deg = 0.951)
+  start.velocity = std::max(0.0, along) * dir;
+  start.acceleration.setZero();
+  return start;
+}
+
 TrajectoryStatus referenceTrajectory(const std::vector<Eigen::Vector3d>& waypoints, const FlatState& start,
                                      const FlatState& end, const ReferenceConfig& config, PolynomialTrajectory* out) {
   if (waypoints.size() < 2 || !(config.max_vel_mps > 0.0) || !(config.max_acc_mps2 > 0.0) ||

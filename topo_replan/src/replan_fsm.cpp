@@ -1295,6 +1295,9 @@ bool ReplanFsm::startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out) {
       if ((g - waypoints.back()).norm() > 1e-3) waypoints.push_back(g);
   }
   if (waypoints.size() < 2) waypoints.push_back(goals.back() + Eigen::Vector3d(1e-3, 0, 0));
+  // Moving across or away from the first leg (a re-route at speed): from the velocity along it only
+  // (the plans start from the vehicle's state; the profile timing is not held to the reference's ramp).
+  start = referenceStartState(start, waypoints[1] - waypoints[0]);
   PolynomialTrajectory ref;
   const TrajectoryStatus status =
       referenceTrajectory(waypoints, start, FlatState::atRest(waypoints.back()), referenceConfigLocked(), &ref);

@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include <cstdio>
+
 #include "topo_planner/topo_replan/polynomial_trajectory.h"
 
 namespace topo_planner {
@@ -167,6 +169,58 @@ TEST(ReferenceTrajectory, ProfileTimingDoesNotRunAway) {
   } else {
     EXPECT_EQ(s, TrajectoryStatus::kInfeasible);
   }
+}
+
+// The state a reference starts in: the vehicle's along the first leg; across or against it, only the
+// velocity's component along the leg and no acceleration.
+TEST(ReferenceStartState, KeepsAStateAlongTheLegAndOnlyTheComponentAlongItOtherwise) {
+  FlatState v = FlatState::atRest({0, 0, 1});
+  v.velocity = Eigen::Vector3d(2.0, 0.3, 0.0);  // 8.5 degrees off the leg
+  v.acceleration = Eigen::Vector3d(0.5, -0.2, 0.0);
+  const Eigen::Vector3d leg(10, 0, 0);
+  FlatState s = referenceStartState(v, leg);
+  EXPECT_TRUE(s.velocity.isApprox(v.velocity));
+  EXPECT_TRUE(s.acceleration.isApprox(v.acceleration));
+  v.velocity = Eigen::Vector3d(1.0, 1.5, 0.0);  // across
+  s = referenceStartState(v, leg);
+  EXPECT_TRUE(s.velocity.isApprox(Eigen::Vector3d(1.0, 0.0, 0.0)));
+  EXPECT_TRUE(s.acceleration.isZero());
+  EXPECT_TRUE(s.position.isApprox(v.position));
+  v.velocity = Eigen::Vector3d(-1.7, 0.5, 0.0);  // away
+  EXPECT_TRUE(referenceStartState(v, leg).velocity.isZero());
+  EXPECT_TRUE(referenceStartState(v, Eigen::Vector3d::Zero()).velocity.isApprox(v.velocity));  // no leg: as it is
+}
+
+// A re-route while flying away from the new route's first leg (mixed world, seed 2, max_vel 3): a
+// reference from the vehicle's velocity looped out and back over seconds, and the plans, aimed at
+// the loop's start while the vehicle turned elsewhere, chased it in place for 22 s. From the start
+// state above the reference leads along the route at once and is no slower.
+TEST(ReferenceTrajectory, FromAVehicleMovingAwayItLeadsAlongTheRoute) {
+  const std::vector<Eigen::Vector3d> w{{0, 0, 1}, {6, 0, 1}, {12, 3, 1}};
+  ReferenceConfig c;
+  c.max_vel_mps = 3.0;
+  c.max_acc_mps2 = 2.5;
+  c.max_segment_length_m = 3.0;
+  c.profile_timing = true;
+  FlatState vehicle = FlatState::atRest(w.front());
+  vehicle.velocity = Eigen::Vector3d(-1.7, 0.5, 0.0);
+  vehicle.acceleration = Eigen::Vector3d(0.0, 0.8, 0.0);
+  auto backwards = [](const PolynomialTrajectory& ref) {  // how far it goes back against the first leg [m]
+    double least_x = 0.0;
+    for (double t = 0.0; t <= ref.duration(); t += 0.01) least_x = std::min(least_x, ref.position(t).x());
+    return -least_x;
+  };
+  PolynomialTrajectory raw, from_rest, led;
+  ASSERT_EQ(referenceTrajectory(w, vehicle, FlatState::atRest(w.back()), c, &raw), TrajectoryStatus::kSuccess);
+  ASSERT_EQ(referenceTrajectory(w, FlatState::atRest(w.front()), FlatState::atRest(w.back()), c, &from_rest),
+            TrajectoryStatus::kSuccess);
+  ASSERT_EQ(referenceTrajectory(w, referenceStartState(vehicle, w[1] - w[0]), FlatState::atRest(w.back()), c, &led),
+            TrajectoryStatus::kSuccess);
+  EXPECT_GT(backwards(raw), 0.2) << "the velocity's loop";
+  EXPECT_LT(backwards(led), 1e-6);
+  EXPECT_LE(led.duration(), from_rest.duration() + 1e-6);
+  std::printf("reference from a vehicle moving away: %.2f s, %.2f m back; led along the route: %.2f s\n", raw.duration(),
+              backwards(raw), led.duration());
 }
 
 }  // namespace

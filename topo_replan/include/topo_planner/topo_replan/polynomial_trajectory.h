@@ -108,4 +108,11 @@ constexpr double kMaxReferenceStretch = 20.0;
 TrajectoryStatus referenceTrajectory(const std::vector<Eigen::Vector3d>& waypoints, const FlatState& start,
                                      const FlatState& end, const ReferenceConfig& config, PolynomialTrajectory* out);
 
+/// The state a reference from `vehicle` along a first leg `leg` starts in. A vehicle moving along the
+/// leg (within about 18 degrees) keeps its state; otherwise the reference starts with only the
+/// velocity's component along the leg (none when moving away) and no acceleration. A vehicle moving
+/// across or away from its route turns whatever the reference does, and a minimum-snap reference
+/// from its velocity loops out and back, stretched to seconds: plans aimed at that loop chase it.
+FlatState referenceStartState(const FlatState& vehicle, const Eigen::Vector3d& leg);
+
 }  // namespace topo_planner
