@@ -39,6 +39,8 @@ def fly(args, style, seed, sensing, vel, bt, goals):
            '--max-vel', str(vel), '--sensing', sensing, '--json', js, '--quiet', '--goal-timeout', str(args.goal_timeout)]
     if args.trace:
         cmd += ['--trace', os.path.join(args.out, name + '.csv')]
+    if args.config:
+        cmd += ['--config', args.config]
     for p in args.param:
         cmd += ['--param', p]
     subprocess.run(cmd, capture_output=True, text=True)
@@ -90,6 +92,7 @@ def main(argv):
     ap.add_argument('--jobs', type=int, default=2)
     ap.add_argument('--trace', action='store_true', help='a CSV trace per flight')
     ap.add_argument('--param', action='append', default=[], help='name=value: a config/planner.yaml override')
+    ap.add_argument('--config', default='', help='a config directory instead of config/ (e.g. another mapping.yaml)')
     args = ap.parse_args(argv[1:])
     args.ws = os.environ.get('WS', os.path.join(ROOT, 'build', 'ws'))
     os.makedirs(args.out, exist_ok=True)
