@@ -14,8 +14,9 @@ namespace {
 const Eigen::Vector3d kBoxLo(2.05, -0.45, 0.55), kBoxHi(2.65, 0.45, 1.45);
 const Eigen::Vector3d kCamera(0.0, 0.0, 1.0);
 
-std::shared_ptr<OccupancyMap> sceneMap(int pixel_skip = 1) {
+std::shared_ptr<OccupancyMap> sceneMap(int pixel_skip = 1, bool projective = false) {
   OccupancyMap::Config c;
+  c.project_free_space = projective;
   c.size_m = {6.0, 6.0, 3.0};
   c.origin_m = {-1.0, -3.0, -0.5};
   c.depth_pixel_skip = pixel_skip;
@@ -138,7 +139,7 @@ TEST(DepthFusion, OneFrameSeesEveryVoxelInView) {
 // of the pixels around a voxel's projection decides).
 TEST(DepthFusion, ProjectionFreesNothingBehindASurface) {
   for (const int skip : {1, 2}) {
-    auto map = sceneMap(skip);
+    auto map = sceneMap(skip, true);
     const PinholeCamera cam = test::smallCamera();
     const Eigen::Vector3d poses[2] = {kCamera, Eigen::Vector3d(0.3, 0.62, 1.37)};
     for (const Eigen::Vector3d& at : poses) {

@@ -1340,6 +1340,21 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
   request.start = takeoverStateLocked(t_take);
   request.reference_time_s = generating ? 0.0 : referenceTimeAtLocked(t_take);
   request.attempt = uint32_t(consecutive_failures_);  // a retry draws another roadmap
+  // An intermediate goal not reached yet bounds the local goal where the reference passes it: the
+  // plans go through it (within waypoint_reached_radius_m, when it counts as reached) instead of
+  // cutting its corner (1.4 m off a waypoint at the end of a wall in fault_hidden_corner).
+  if (next_goal_ + 1 < goals_.size() && !reference_.empty()) {
+    double best_t = -1.0, best_d = INFINITY;
+    for (double s = request.reference_time_s; s <= reference_.duration(); s += 0.02) {
+      const double dist = (reference_.position(s) - goals_[next_goal_]).norm();
+      if (dist < best_d) best_d = dist, best_t = s;
+    }
+    // (Not once it is within the radius along the reference: the goal would be about the start.)
+    if (best_d <= config_.waypoint_reached_radius_m &&
+        (reference_.position(best_t) - reference_.position(request.reference_time_s)).norm() >
+            config_.waypoint_reached_radius_m)
+      request.max_local_goal_time_s = best_t;
+  }
   const PolynomialTrajectory reference = reference_;
   request.reference = &reference;
   const int64_t current_id = current_ ? current_->id : -1;

@@ -161,8 +161,9 @@ LocalProblem TopoReplanner::localProblem(const EsdfMap& map, const ReplanRequest
   // At speed, horizon_time_s of flight (a plan that ends moving must end further ahead than the
   // vehicle needs to stop, or one failed replan brakes it: at 4.5 m/s a 7 m plan ended 1.6 s ahead).
   const double horizon = std::max(config_.horizon_m, config_.horizon_time_s * start.velocity.norm());
-  while (t_h < T && arc < horizon) {
-    const double t_next = std::min(T, t_h + dt);
+  const double t_end = std::isnan(request.max_local_goal_time_s) ? T : std::clamp(request.max_local_goal_time_s, t0, T);
+  while (t_h < t_end && arc < horizon) {
+    const double t_next = std::min(t_end, t_h + dt);
     const Eigen::Vector3d p = ref.position(t_next);
     arc += (p - previous).norm();
     previous = p;

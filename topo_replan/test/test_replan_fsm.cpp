@@ -1599,7 +1599,9 @@ TEST(ReplanFsm, AStopJustBeforeATakeoverStartsFromThePlanAboutToBeFlown) {
     const std::optional<ExecTrajectory> before = fsm->current();
     // Once a plan waits for its take-over at cruise, the goals given again: planned at once.
     const bool waiting = before && !before->manoeuvre() && before->start_time_s > t && t > 2.0;
-    if (waiting) ASSERT_EQ(fsm->setGoals(goals), GoalStatus::kAccepted);
+    if (waiting) {
+      ASSERT_EQ(fsm->setGoals(goals), GoalStatus::kAccepted);
+    }
     const FsmOutput out = fsm->tick(t, map);
     if (waiting && out.trajectory && !out.trajectory->manoeuvre()) next = before, newest = out.trajectory;
   }

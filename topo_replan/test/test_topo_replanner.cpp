@@ -318,6 +318,32 @@ TEST(TopoReplanner, LocalGoalSkipsPastAnObstacleRightBehindTheFirst) {
   EXPECT_LT(in_gap.goal.x(), 8.2);
 }
 
+// An intermediate goal not reached yet bounds the local goal (the FSM passes where the reference
+// passes it): the plan ends there instead of cutting its corner towards a goal further on.
+TEST(TopoReplanner, TheLocalGoalStopsAtAnIntermediateGoal) {
+  SyntheticScene scene({20.0, 8.0, 3.0});
+  const EsdfMap& map = scene.finish();
+  const PolynomialTrajectory ref = straightReference({1, 4, 1.5}, {19, 4, 1.5});
+  std::string err;
+  auto replanner = TopoReplanner::create(deterministicConfig(2), &err);
+  ASSERT_TRUE(replanner) << err;
+  ReplanRequest req = requestAlong(ref, 1.0);
+  const LocalProblem free = replanner->localProblem(map, req);
+  ASSERT_EQ(free.status, ReplanStatus::kSuccess) << free.message;
+  // The waypoint well within the horizon: the goal is it.
+  double t_wp = 0.0;
+  while ((ref.position(t_wp) - Eigen::Vector3d(6, 4, 1.5)).norm() > 0.01) t_wp += 0.001;
+  ASSERT_LT(t_wp, free.goal_time_s - 1.0);
+  req.max_local_goal_time_s = t_wp;
+  const LocalProblem capped = replanner->localProblem(map, req);
+  ASSERT_EQ(capped.status, ReplanStatus::kSuccess) << capped.message;
+  EXPECT_NEAR(capped.goal_time_s, t_wp, 1e-9);
+  EXPECT_LT((capped.goal - Eigen::Vector3d(6, 4, 1.5)).norm(), 0.02);
+  // None (NaN): as without.
+  req.max_local_goal_time_s = NAN;
+  EXPECT_NEAR(replanner->localProblem(map, req).goal_time_s, free.goal_time_s, 1e-9);
+}
+
 // A reference that leaves the height band (a minimum-snap reference overshoots its route over a
 // wall as high as the band: seen in a windows flight, the local goal 0.26 m above the band) gets no
 // local goal outside it: out of the band counts as a collision of the reference, and the plan

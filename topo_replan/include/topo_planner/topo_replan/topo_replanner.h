@@ -31,6 +31,7 @@
 // Threads: replan() is not reentrant (one caller at a time); inside, each worker uses its own
 // optimiser and writes only its own candidate; the map is only read.
 
+#include <cmath>
 #include <memory>
 #include <optional>
 #include <string>
@@ -69,6 +70,9 @@ struct ReplanRequest {
   FlatState start;                                ///< current state (its position, velocity, acceleration)
   const PolynomialTrajectory* reference = nullptr;  ///< the global reference
   double reference_time_s = 0.0;                  ///< time on the reference where the local segment begins
+  /// The local goal no later on the reference than this: an intermediate goal not reached yet, so
+  /// that the plans pass through it instead of cutting its corner [s].
+  double max_local_goal_time_s = INFINITY;
   /// Failed attempts at this problem so far: the search is seeded with its seed + attempt, so a
   /// retry from the same state draws another roadmap (the result is still a function of the input).
   uint32_t attempt = 0;
