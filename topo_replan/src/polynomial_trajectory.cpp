@@ -192,6 +192,23 @@ FlatState referenceStartState(const FlatState& vehicle, const Eigen::Vector3d& l
   return start;
 }
 
+double waypointPassTime(const PolynomialTrajectory& reference, const Eigen::Vector3d& waypoint, double t_from,
+                        double radius, double step) {
+  const double T = reference.duration();
+  if (reference.empty() || !waypoint.allFinite() || !std::isfinite(t_from) || !(radius >= 0.0) ||
+      !std::isfinite(radius) || !(step > 0.0) || !std::isfinite(step))
+    return NAN;
+  double best_t = NAN, best_d = INFINITY;
+  for (double s = std::clamp(t_from, 0.0, T);; s = std::min(s + step, T)) {
+    const double d = (reference.position(s) - waypoint).norm();
+    if (d <= radius && d < best_d) best_d = d, best_t = s;
+    if ((d > radius && std::isfinite(best_d)) || s >= T) break;  // the first pass is over
+  }
+  if (std::isnan(best_t)) return NAN;
+  if ((reference.position(best_t) - reference.position(std::clamp(t_from, 0.0, T))).norm() <= radius) return NAN;
+  return best_t;
+}
+
 TrajectoryStatus referenceTrajectory(const std::vector<Eigen::Vector3d>& waypoints, const FlatState& start,
                                      const FlatState& end, const ReferenceConfig& config, PolynomialTrajectory* out) {
   if (waypoints.size() < 2 || !(config.max_vel_mps > 0.0) || !(config.max_acc_mps2 > 0.0) ||

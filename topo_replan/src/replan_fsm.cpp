@@ -755,8 +755,8 @@ std::optional<ExecTrajectory> ReplanFsm::escapeTrajectoryLocked(double t, const 
   return escape;
 }
 
-std::optional<ExecTrajectory> ReplanFsm::backoffTrajectoryLocked(double t, const EsdfMap& map,
-                                                                 std::string* report) const {
+std::optional<ExecTrajectory> ReplanFsm::backoffTrajectoryLocked(double t, const EsdfMap& map, std::string* report,
+                                                                 bool* to_anchor_out) const {
   const Eigen::Vector3d p0 = takeoverStateLocked(t).position;
   double d0 = 0.0;
   if (!map.interpolate(p0, &d0, nullptr)) {
@@ -776,9 +776,22 @@ std::optional<ExecTrajectory> ReplanFsm::backoffTrajectoryLocked(double t, const
     if (!map.interpolate(*it, &d_end, nullptr)) d_end = -INFINITY;
     if (length >= config_.backoff_length_m && d_end >= config_.escape_clearance_m) break;
   }
+  bool to_anchor = false;
   if (length < std::min(0.3, config_.backoff_length_m) || walk.size() < 2) {
-    *report = "no back-off: no flown path to go back along";
-    return std::nullopt;
+    // No flown path since the vehicle hovered without having flown there (a mission's start, or at
+    // rest after a re-anchoring cleared the map): back to that hover, the known anchor, when it has
+    // crept away from it within the anchor's zone. There the blind zone beside the camera counts as
+    // known; from where it crept to, the space just ahead (seen by the camera, its clearance ball
+    // not) is neither, and every plan was cut to a hold (fault_odom_blackout held 60 s).
+    const double from_anchor = known_anchor_ ? (p0 - *known_anchor_).norm() : INFINITY;
+    if (!(from_anchor >= 0.1 && from_anchor <= config_.known_start_radius_m + 0.05)) {
+      *report = "no back-off: no flown path to go back along";
+      return std::nullopt;
+    }
+    walk = {p0, *known_anchor_};
+    length = from_anchor;
+    if (!map.interpolate(*known_anchor_, &d_end, nullptr)) d_end = -INFINITY;
+    to_anchor = true;
   }
   // The flown path zig-zags where the vehicle hovered and re-planned: shortcut it where the straight
   // way keeps the clearance the vehicle had (or the safety clearance), so the manoeuvre has no corners.
@@ -800,10 +813,11 @@ std::optional<ExecTrajectory> ReplanFsm::backoffTrajectoryLocked(double t, const
   }
   walk = std::move(smooth);
   std::optional<ExecTrajectory> backoff = restToRestLocked(walk, t, map, d0, config_.backoff_speed_mps, "back-off", report);
+  if (to_anchor_out) *to_anchor_out = to_anchor;
   if (!backoff || !report->empty()) return backoff;
   char text[160];
-  std::snprintf(text, sizeof(text), "back-off: %.2f m back along the flown path, from %.2f m to %.2f m clearance in %.1f s",
-                length, d0, d_end, backoff->spline.duration());
+  std::snprintf(text, sizeof(text), "back-off: %.2f m back %s, from %.2f m to %.2f m clearance in %.1f s", length,
+                to_anchor ? "to the hover it started from" : "along the flown path", d0, d_end, backoff->spline.duration());
   *report = text;
   return backoff;
 }
@@ -1344,16 +1358,9 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
   // plans go through it (within waypoint_reached_radius_m, when it counts as reached) instead of
   // cutting its corner (1.4 m off a waypoint at the end of a wall in fault_hidden_corner).
   if (next_goal_ + 1 < goals_.size() && !reference_.empty()) {
-    double best_t = -1.0, best_d = INFINITY;
-    for (double s = request.reference_time_s; s <= reference_.duration(); s += 0.02) {
-      const double dist = (reference_.position(s) - goals_[next_goal_]).norm();
-      if (dist < best_d) best_d = dist, best_t = s;
-    }
-    // (Not once it is within the radius along the reference: the goal would be about the start.)
-    if (best_d <= config_.waypoint_reached_radius_m &&
-        (reference_.position(best_t) - reference_.position(request.reference_time_s)).norm() >
-            config_.waypoint_reached_radius_m)
-      request.max_local_goal_time_s = best_t;
+    const double t_pass = waypointPassTime(reference_, goals_[next_goal_], request.reference_time_s,
+                                           config_.waypoint_reached_radius_m);
+    if (std::isfinite(t_pass)) request.max_local_goal_time_s = t_pass;
   }
   const PolynomialTrajectory reference = reference_;
   request.reference = &reference;
@@ -1434,6 +1441,7 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
     }
     std::optional<ExecTrajectory> backoff;
     std::string backoff_report;
+    bool to_anchor = false;
     // (Held for look_hold_min_s too: the plans of a hold come every tick, and the camera turning
     // round towards the way on needs its time; 5 holds in 0.25 s backed a vehicle off that had just
     // reached a goal and turned to the next one behind it.)
@@ -1441,7 +1449,7 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
         backoffs_ < config_.max_backoffs) {
       // From the takeover time, as the plan it replaces (the hold published last tick may start
       // between now and then: taking over at t would leave it out).
-      backoff = backoffTrajectoryLocked(t_take, map, &backoff_report);
+      backoff = backoffTrajectoryLocked(t_take, map, &backoff_report, &to_anchor);
       if (backoff && backoff->has_heading_target) backoff.reset();  // a look again: no use
     }
     // Holding there is no progress: it does not restart the mission's time limit, and ends the
@@ -1461,12 +1469,13 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
     if (backoff) {
       // Holding there did not show the way on: a stall. The route rebuilt after the back-off weighs
       // against the place (another opening, another side), as the progress remedy's routes do: the
-      // zone lies ahead along the way (where the progress is tracked), else around the hold.
+      // zone lies ahead along the way (where the progress is tracked), else around the hold. (Not
+      // after a back-off to the anchor: the camera's blind zone held it there, not the way.)
       const bool tracked = config_.progress_timeout_s > 0.0 && progress_.active();
-      if (config_.stall_zone_radius_m > 0.0)
+      if (config_.stall_zone_radius_m > 0.0 && !to_anchor)
         addStallZoneLocked({tracked ? progress_.ahead(config_.stall_zone_radius_m) : look_hold_position_,
                             config_.stall_zone_radius_m});
-      route_stale_ = true;
+      route_stale_ = route_stale_ || !to_anchor;
       event.message += (event.message.empty() ? "" : "; ") + std::string("held at the edge of the known space ") +
                        std::to_string(config_.max_look_holds) + " times; " + backoff_report;
       startManoeuvreLocked(*backoff, true, &event, out, backoff_report);
@@ -1482,6 +1491,11 @@ void ReplanFsm::plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, st
     rerouted_since_success_ = false;
     failures_at_reroute_ = 0;
     if (!look_hold) last_progress_s_ = t;
+    if (traj.stops_before_unknown) {  // in the event log: where the vehicle waits on its map
+      char text[96];
+      std::snprintf(text, sizeof(text), "stops before unknown space, braking from +%.2f s", traj.brake_start_s - t_take);
+      event.message = text;
+    }
     event.published = true;
     out->trajectory = traj;
     setState(FsmState::kExecTraj, out, "");

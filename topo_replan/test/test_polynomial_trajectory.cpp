@@ -223,5 +223,44 @@ TEST(ReferenceTrajectory, FromAVehicleMovingAwayItLeadsAlongTheRoute) {
               backwards(raw), led.duration());
 }
 
+
+// The bound a plan's local goal gets at an intermediate goal: the closest approach of the first pass
+// within the radius. A route that comes back by the same waypoint (out and back along a corridor)
+// is bounded at the first pass, not at the later one, even when the later one passes closer.
+TEST(WaypointPassTime, TheClosestPointOfTheFirstPassWithinTheRadius) {
+  // Out along y = 0, past (4, 0.5, 1) at 0.5 m, and back along y = 0.8, past it at 0.3 m.
+  const std::vector<Eigen::Vector3d> w{{0, 0, 1}, {8, 0, 1}, {8, 0.8, 1}, {0, 0.8, 1}};
+  ReferenceConfig c;
+  c.max_vel_mps = 2.0;
+  c.max_segment_length_m = 1.0;  // as the FSM's references: close to the route's legs
+  PolynomialTrajectory ref;
+  ASSERT_EQ(referenceTrajectory(w, FlatState::atRest(w.front()), FlatState::atRest(w.back()), c, &ref),
+            TrajectoryStatus::kSuccess);
+  const Eigen::Vector3d wp(4, 0.5, 1);
+  const double t = waypointPassTime(ref, wp, 0.0, 0.6);
+  ASSERT_TRUE(std::isfinite(t));
+  EXPECT_NEAR(ref.position(t).x(), 4.0, 0.2);
+  EXPECT_LT(t, 0.5 * ref.duration());  // the way out
+  // Sampled closest point of that pass: no sample of the pass is closer.
+  for (double s = 0.0; s < 0.5 * ref.duration(); s += 0.01)
+    EXPECT_GE((ref.position(s) - wp).norm(), (ref.position(t) - wp).norm() - 0.01);
+  // Past the first pass, the way back.
+  const double t_back = waypointPassTime(ref, wp, 0.5 * ref.duration(), 0.6);
+  ASSERT_TRUE(std::isfinite(t_back));
+  EXPECT_GT(t_back, 0.5 * ref.duration());
+  EXPECT_NEAR(ref.position(t_back).x(), 4.0, 0.3);
+  EXPECT_LT((ref.position(t_back) - wp).norm(), (ref.position(t) - wp).norm());  // closer, yet second
+  // Never within the radius, or about there already: no bound.
+  EXPECT_TRUE(std::isnan(waypointPassTime(ref, {4, 5, 1}, 0.0, 0.6)));
+  double t_near = 0.0;
+  while ((ref.position(t_near) - wp).norm() > 0.59) t_near += 0.01;
+  EXPECT_TRUE(std::isnan(waypointPassTime(ref, wp, t_near, 0.6)));
+  // Bad input.
+  EXPECT_TRUE(std::isnan(waypointPassTime(ref, {NAN, 0, 1}, 0.0, 0.6)));
+  EXPECT_TRUE(std::isnan(waypointPassTime(ref, wp, NAN, 0.6)));
+  EXPECT_TRUE(std::isnan(waypointPassTime(ref, wp, 0.0, -1.0)));
+  EXPECT_TRUE(std::isnan(waypointPassTime(PolynomialTrajectory(), wp, 0.0, 0.6)));
+}
+
 }  // namespace
 }  // namespace topo_planner

@@ -1749,6 +1749,62 @@ TEST(ReplanFsm, FliesOnFromWhereItStoppedAfterAnOdometryJumpClearedTheMap) {
   }
 }
 
+// A hover whose map was just cleared (a re-anchoring): the plans creep along the way within the
+// anchor's zone and hold at its edge, where the camera sees a cone from the hold. Its apex leaves the
+// clearance balls just ahead unobserved outside the anchor's zone, so every plan from there was cut
+// to a hold, and with no flown path to back off along the vehicle held for good (fault_odom_blackout).
+// It backs off to the hover it started from; the cone from there covers the way, and it flies on.
+TEST(ReplanFsm, BacksOffToTheHoverWhenItCreptToWhereItCannotCommit) {
+  const Eigen::Vector3d start(1.0, 4.0, 1.5), goal(4.5, 4.0, 1.5);
+  const double tan_v = std::tan(32.0 * M_PI / 180.0), tan_h = std::tan(39.5 * M_PI / 180.0);
+  auto inCone = [&](const Eigen::Vector3d& apex, const Eigen::Vector3d& p) {  // the camera looks along +x
+    const Eigen::Vector3d d = p - apex;
+    return d.x() > 0.0 && d.x() < 5.0 && std::abs(d.z()) <= tan_v * d.x() && std::abs(d.y()) <= tan_h * d.x();
+  };
+  auto sceneOf = [&](const std::vector<Eigen::Vector3d>& apexes) {
+    auto c = std::make_unique<Corridor>();
+    c->scene.fill([&](const Eigen::Vector3d& p) {
+      for (const Eigen::Vector3d& a : apexes)
+        if (inCone(a, p)) return false;
+      return true;
+    }, VoxelState::kUnknown);
+    c->scene.finish();
+    return c;
+  };
+  const std::unique_ptr<Corridor> cleared = sceneOf({});
+  std::unique_ptr<Corridor> seen;
+  std::optional<Eigen::Vector3d> hold, last;
+  bool back = false;
+  auto mapAt = [&](double, const Eigen::Vector3d& p) -> const EsdfMap& {
+    const bool still = last && (p - *last).norm() < 1e-4;
+    last = p;
+    if (!hold && still && (p - start).norm() >= 0.1) {
+      hold = p;  // at rest at the edge of the anchor's zone: the first frame, from here
+      seen = sceneOf({p});
+    } else if (hold && !back && (p - start).norm() < 0.02) {
+      back = true;  // at the start again: its frame too
+      seen = sceneOf({*hold, start});
+    }
+    return seen ? seen->scene.finish() : cleared->scene.finish();
+  };
+  Corridor free_scene;
+  const EsdfMap& truth = free_scene.scene.finish();
+  ReplanFsm::Config config = testConfig();
+  auto fsm = makeFsm(config);
+  const FlightLog log = fly(fsm.get(), start, {goal}, mapAt, 600, truth);
+  ASSERT_TRUE(hold) << "it never held away from the start";
+  EXPECT_TRUE(back) << "held at " << hold->transpose();
+  EXPECT_TRUE(log.goal_reached);
+  bool backed_off = false;
+  for (const FsmEvent& e : log.events)
+    backed_off = backed_off || e.message.find("back to the hover it started from") != std::string::npos;
+  EXPECT_TRUE(backed_off);
+  // Outside the anchor's zone only inside the cones seen.
+  for (const Eigen::Vector3d& q : log.flown)
+    if ((q - start).norm() > config.known_start_radius_m + 1e-6) EXPECT_TRUE(inCone(start, q)) << q.transpose();
+  expectContinuous(log.trajectories, config.max_start_velocity_step_mps + 1e-6);
+}
+
 // The FSM's clock steps by +-5 s mid-flight, or back by less than the forward threshold (a step
 // back of 0.78 s was taken for call ordering: every later input was refused as out of order, the
 // vehicle braked and the trajectory server, which had shifted, was a vehicle-length away): the

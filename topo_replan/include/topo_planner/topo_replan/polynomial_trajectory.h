@@ -115,4 +115,12 @@ TrajectoryStatus referenceTrajectory(const std::vector<Eigen::Vector3d>& waypoin
 /// from its velocity loops out and back, stretched to seconds: plans aimed at that loop chase it.
 FlatState referenceStartState(const FlatState& vehicle, const Eigen::Vector3d& leg);
 
+/// The time the reference, from t_from on, first passes within `radius` of `waypoint`: the closest
+/// approach of that first pass (sampled every `step` seconds). NaN when it never comes that close,
+/// or when that closest point lies within `radius` of where the reference is at t_from (the
+/// waypoint is about reached: no use bounding a plan there). A plan's local goal bounded at this
+/// time flies through an intermediate goal instead of cutting its corner.
+double waypointPassTime(const PolynomialTrajectory& reference, const Eigen::Vector3d& waypoint, double t_from,
+                        double radius, double step = 0.02);
+
 }  // namespace topo_planner

@@ -474,9 +474,11 @@ class ReplanFsm {
   /// never come closer to an obstacle than it starts (or than the safety clearance); nullopt with
   /// the reason in `report` when there is no such way.
   std::optional<ExecTrajectory> escapeTrajectoryLocked(double t, const EsdfMap& map, std::string* report) const;
-  /// From the commanded position at rest, back along the flown path (see Config); nullopt with the
-  /// reason when there is no flown path or the fitted manoeuvre fails its check.
-  std::optional<ExecTrajectory> backoffTrajectoryLocked(double t, const EsdfMap& map, std::string* report) const;
+  /// From the commanded position at rest, back along the flown path (see Config), or with none, back
+  /// to the known anchor when within its zone (*to_anchor true); nullopt with the reason when there
+  /// is neither or the fitted manoeuvre fails its check.
+  std::optional<ExecTrajectory> backoffTrajectoryLocked(double t, const EsdfMap& map, std::string* report,
+                                                        bool* to_anchor = nullptr) const;
   /// A slow rest-to-rest manoeuvre along `walk` (from the commanded position p0, d0 from obstacles),
   /// peaking at speed_mps, checked like an escape; nullopt with the reason when the check fails.
   std::optional<ExecTrajectory> restToRestLocked(const std::vector<Eigen::Vector3d>& walk, double t, const EsdfMap& map,
