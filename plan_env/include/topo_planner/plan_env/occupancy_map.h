@@ -71,7 +71,7 @@ class OccupancyMap {
     int depth_pixel_skip = 2;       ///< fuse every n-th pixel in u and v (1 = all)
     int max_image_pixels = 4096 * 4096;  ///< larger images are refused
     bool merge_rays = true;  ///< stop a ray at a voxel another ray of the frame has freed (see class comment)
-    bool project_free_space = false;  ///< depth images: free space by projection (see class comment); false: rays
+    bool project_free_space = true;   ///< depth images: free space by projection (see class comment); false: rays
     double max_memory_mb = 4096.0;  ///< refuse maps whose layers would need more [MB]
 
     /// True when every field is in range; otherwise says why.

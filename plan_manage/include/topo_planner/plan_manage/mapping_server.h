@@ -45,7 +45,7 @@
 //   map/depth_pixel_skip        2         fuse every n-th pixel in u and v
 //   map/max_image_pixels        16777216  larger images are refused [pixels]
 //   map/merge_rays              true      stop a ray where another ray of the frame cleared space
-//   map/project_free_space      false     depth images: free space by projection (no unseen holes)
+//   map/project_free_space      true      depth images: free space by projection (no unseen holes)
 //   map/max_memory_mb           4096      refuse larger maps [MB]
 //   esdf/max_distance_m         2.0       ESDF truncation distance [m]
 //   esdf/inflate_radius_m       0.2       obstacle inflation radius [m]
