@@ -1800,8 +1800,11 @@ TEST(ReplanFsm, BacksOffToTheHoverWhenItCreptToWhereItCannotCommit) {
     backed_off = backed_off || e.message.find("back to the hover it started from") != std::string::npos;
   EXPECT_TRUE(backed_off);
   // Outside the anchor's zone only inside the cones seen.
-  for (const Eigen::Vector3d& q : log.flown)
-    if ((q - start).norm() > config.known_start_radius_m + 1e-6) EXPECT_TRUE(inCone(start, q)) << q.transpose();
+  for (const Eigen::Vector3d& q : log.flown) {
+    if ((q - start).norm() > config.known_start_radius_m + 1e-6) {
+      EXPECT_TRUE(inCone(start, q)) << q.transpose();
+    }
+  }
   expectContinuous(log.trajectories, config.max_start_velocity_step_mps + 1e-6);
 }
 
