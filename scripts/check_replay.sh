@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# The record-and-replay check of `make test` (README, "Record and replay"): a short simulated flight
-# is recorded with planner.launch's record:=true, then its inputs are replayed with the bag's clock
-# into a planner.launch of its own (no simulator), as the README tells a user to, and the replay is
-# compared with the flight (scripts/replay_compare.py):
+# The record-and-replay check of `make test` (docs/on_your_drone.md, "Record and replay"): a short
+# simulated flight is recorded with planner.launch's record:=true, then its inputs are replayed with
+# the bag's clock into a planner.launch of its own (no simulator), as docs/on_your_drone.md tells a
+# user to, and the replay is compared with the flight (scripts/replay_compare.py):
 #   record  the flight succeeded and its bag holds every input topic the replay needs
 #   map     the replayed map is the flight's (the same occupied voxels)
 #   route   the replayed planner found the flight's first global route

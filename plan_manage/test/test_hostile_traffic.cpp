@@ -5,7 +5,7 @@
 // Every message sent here is one the nodes must refuse: non-finite values, sizes over their limits
 // or not matching their own layout, wrong encodings and frames, stamps far in the past or the
 // future. (A well-formed message with a current stamp cannot be told from the real one: ROS 1 has no
-// authentication; README, "Security".) The depth images and point clouds sent would draw a wall in
+// authentication; docs/security.md.) The depth images and point clouds sent would draw a wall in
 // front of the vehicle if they were fused. Checks, once the flight monitor reports:
 //   - the flight succeeded: every goal reached, no collision, no setpoint jump, no planner restart;
 //   - no node died (the nodes of the closed loop are still registered with the master);

@@ -1,6 +1,6 @@
 #pragma once
 // Structured values from a fuzzer's bytes, for the harnesses that build messages and configs field
-// by field (README.md, Fuzzing). Reading past the end
+// by field (docs/fuzzing.md). Reading past the end
 // yields zeros, so every input, however short, is a complete message. A number is either the field's
 // default, a value from a short list of edge cases (0, negative, NaN, +-inf, huge, tiny), a scaled
 // default, or 8 raw bytes: the checks a parameter or message field meets are mostly about those.

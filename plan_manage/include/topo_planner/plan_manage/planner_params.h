@@ -107,7 +107,7 @@ void readFsmParams(Reader& r, ReplanFsm::Config* fsm, double* reference_speed_ra
   r.read("fsm/sensing_range_m", f.sensing_range_m);
 
   TopoReplanner::Config& p = f.replanner;
-  p.local_goal_margin_m = 2.0;  // 1 m failed 44 of 344 moving-start replans, 2 m 4 (README)
+  p.local_goal_margin_m = 2.0;  // 1 m failed 44 of 344 moving-start replans, 2 m 4 (docs/modules.md)
   r.read("replan/horizon_m", p.horizon_m);
   p.horizon_time_s = 3.0;
   r.read("replan/horizon_time_s", p.horizon_time_s);
