@@ -273,4 +273,13 @@ std::optional<ExecTrajectory> restToRest(const std::vector<Eigen::Vector3d>& wal
   return escape;
 }
 
+void FlownPath::record(const Eigen::Vector3d& p) {
+  if (points_.empty() || (p - points_.back()).norm() >= kSpacingM) points_.push_back(p);
+  if (points_.size() > kMaxPoints) points_.erase(points_.begin(), points_.begin() + kMaxPoints / 2);
+}
+
+void FlownPath::useUpTo(const Eigen::Vector3d& end) {
+  while (!points_.empty() && (points_.back() - end).norm() > 0.3) points_.pop_back();
+}
+
 }  // namespace topo_planner

@@ -102,7 +102,8 @@ double ReplanFsm::cruiseSpeed(const Config& config) {
   return std::min(max_vel, std::max(v, 0.5));
 }
 
-ManoeuvreConfig ReplanFsm::manoeuvreConfig(const Config& c) {
+ManoeuvreConfig ReplanFsmConfig::manoeuvres() const {
+  const ReplanFsmConfig& c = *this;
   ManoeuvreConfig m;
   m.safety_clearance_m = c.safety_clearance_m;
   m.safety_sample_s = c.safety_sample_s;
@@ -120,7 +121,8 @@ ManoeuvreConfig ReplanFsm::manoeuvreConfig(const Config& c) {
   return m;
 }
 
-MissionRemedies::Config ReplanFsm::remediesConfig(const Config& c) {
+MissionRemedies::Config ReplanFsmConfig::remedies() const {
+  const ReplanFsmConfig& c = *this;
   MissionRemedies::Config r;
   r.global_route = c.global_route;
   r.max_plan_failures = c.max_plan_failures;
@@ -133,7 +135,8 @@ MissionRemedies::Config ReplanFsm::remediesConfig(const Config& c) {
   return r;
 }
 
-RouteWatch::Config ReplanFsm::routeWatchConfig(const Config& c) {
+RouteWatch::Config ReplanFsmConfig::routeWatch() const {
+  const ReplanFsmConfig& c = *this;
   RouteWatch::Config w;
   w.safety_clearance_m = c.safety_clearance_m;
   w.route_clearance_m = c.route.clearance_m;
@@ -143,7 +146,8 @@ RouteWatch::Config ReplanFsm::routeWatchConfig(const Config& c) {
   return w;
 }
 
-ServerLink::Config ReplanFsm::serverLinkConfig(const Config& c) {
+ServerLink::Config ReplanFsmConfig::serverLink() const {
+  const ReplanFsmConfig& c = *this;
   ServerLink::Config l;
   l.timeout_s = c.server_timeout_s;
   l.grace_s = c.server_grace_s;
@@ -153,7 +157,8 @@ ServerLink::Config ReplanFsm::serverLinkConfig(const Config& c) {
   return l;
 }
 
-InputMonitor::Config ReplanFsm::inputMonitorConfig(const Config& c) {
+InputMonitor::Config ReplanFsmConfig::inputMonitor() const {
+  const ReplanFsmConfig& c = *this;
   InputMonitor::Config m;
   m.depth_timeout_s = c.depth_timeout_s;
   m.odom_timeout_s = c.odom_timeout_s;
@@ -162,7 +167,8 @@ InputMonitor::Config ReplanFsm::inputMonitorConfig(const Config& c) {
   return m;
 }
 
-KnownSpaceCommitment::Config ReplanFsm::commitmentConfig(const Config& c) {
+KnownSpaceCommitment::Config ReplanFsmConfig::commitment() const {
+  const ReplanFsmConfig& c = *this;
   KnownSpaceCommitment::Config k;
   k.enabled = c.commit_to_known_space;
   k.clearance_m = c.safety_clearance_m;
@@ -174,6 +180,25 @@ KnownSpaceCommitment::Config ReplanFsm::commitmentConfig(const Config& c) {
   k.max_z_m = c.route.max_z_m;
   k.sample_s = c.safety_sample_s;
   return k;
+}
+
+SafetyCheck::Config ReplanFsmConfig::safetyCheck() const {
+  SafetyCheck::Config s;
+  s.safety_clearance_m = safety_clearance_m;
+  s.safety_sample_s = safety_sample_s;
+  s.brake_acc_mps2 = brake_acc_mps2;
+  s.collision_brake_acc_mps2 = commit_to_known_space ? std::max(brake_acc_mps2, commit_brake_acc_mps2) : brake_acc_mps2;
+  s.emergency_margin_s = emergency_margin_s;
+  s.stopped_speed_mps = stopped_speed_mps;
+  s.max_tracking_error_m = max_tracking_error_m;
+  return s;
+}
+
+PlanCommitConfig ReplanFsmConfig::planCommit() const {
+  PlanCommitConfig p;
+  p.commitment = commitment();
+  p.max_start_velocity_step_mps = max_start_velocity_step_mps;
+  return p;
 }
 
 }  // namespace topo_planner

@@ -229,5 +229,22 @@ TEST(Escape, ClimbsTheDistanceFieldOutOfAnObstaclesClearance) {
   EXPECT_NE(report.find("disabled"), std::string::npos) << report;
 }
 
+TEST(FlownPath, KeepsPositionsApartDropsTheOldestAndIsUsedUpByABackOff) {
+  FlownPath flown;
+  for (int i = 0; i <= 100; ++i) flown.record(Eigen::Vector3d(0.05 * i, 0.0, 1.0));  // 5 m at 5 cm steps
+  ASSERT_EQ(flown.points().size(), 21u);  // every 0.25 m
+  EXPECT_TRUE(flown.points().back().isApprox(Eigen::Vector3d(5.0, 0.0, 1.0)));
+  // A back-off to x = 3.9: the points beyond (more than 0.3 m from its end) are used up.
+  flown.useUpTo(Eigen::Vector3d(3.9, 0.0, 1.0));
+  EXPECT_NEAR(flown.points().back().x(), 4.0, 1e-9);
+  // A long flight keeps the newest kMaxPoints at most.
+  for (int i = 0; i < 1000; ++i) flown.record(Eigen::Vector3d(4.0 + 0.25 * i, 0.0, 1.0));
+  EXPECT_LE(flown.points().size(), FlownPath::kMaxPoints);
+  EXPECT_GT(flown.points().size(), FlownPath::kMaxPoints / 2);
+  EXPECT_NEAR(flown.points().back().x(), 4.0 + 0.25 * 999, 1e-9);
+  flown.clear();
+  EXPECT_TRUE(flown.points().empty());
+}
+
 }  // namespace
 }  // namespace topo_planner

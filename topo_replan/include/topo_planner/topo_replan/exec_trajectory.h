@@ -8,6 +8,7 @@
 #include <Eigen/Core>
 
 #include "topo_planner/bspline_opt/uniform_bspline.h"
+#include "topo_planner/topo_replan/polynomial_trajectory.h"
 
 namespace topo_planner {
 
@@ -36,6 +37,25 @@ struct ExecTrajectory {
   double endTime() const { return start_time_s + spline.duration(); }
   /// Braking or escape: checked when made, ends at rest, not on the reference, not replanned.
   bool manoeuvre() const { return braking || escape; }
+  /// The commanded state at t: before its start, its start; after its end, at rest at its end.
+  FlatState stateAt(double t) const;
+  /// The time on `reference` where the vehicle is at t: proportional between reference_start_s and
+  /// reference_end_s, refined to the reference's point nearest the trajectory's (within 2 s); 0 for
+  /// a manoeuvre.
+  double referenceTimeAt(double t, const PolynomialTrajectory& reference) const;
+  /// Moves it in time by dt (a time jump, a re-synchronisation with the trajectory server).
+  void shift(double dt) {
+    start_time_s += dt;
+    brake_start_s += dt;
+  }
 };
+
+/// The trajectory flown at t: `current`, or before its start the one it replaced (`previous`, may be
+/// null): flown then, or (t a rounding error before its own start: 26.15 + 0.1 > 26.25) about to
+/// be. The current one, clamped to its later start, would put the state where the vehicle is only
+/// later (a stop from there stepped the setpoint).
+inline const ExecTrajectory& flownAt(const ExecTrajectory& current, const ExecTrajectory* previous, double t) {
+  return previous && t < current.start_time_s ? *previous : current;
+}
 
 }  // namespace topo_planner

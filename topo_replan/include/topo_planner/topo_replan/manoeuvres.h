@@ -69,6 +69,24 @@ struct BackoffWalk {
   bool to_anchor = false;               ///< back to the known anchor, not along a flown path
 };
 
+/// The flown path the back-offs walk back along: commanded positions of checked trajectories (not
+/// the manoeuvres: a back-off would walk back along the previous one), newest last.
+class FlownPath {
+ public:
+  static constexpr double kSpacingM = 0.25;  ///< between recorded positions [m]
+  static constexpr size_t kMaxPoints = 200;  ///< beyond, the oldest half is dropped
+  /// The commanded position now: kept when kSpacingM from the last one kept.
+  void record(const Eigen::Vector3d& p);
+  /// A back-off to `end` used the way back up to there: a later one goes on from where it ends.
+  void useUpTo(const Eigen::Vector3d& end);
+  /// Forgotten (an odometry jump: in the old frame).
+  void clear() { points_.clear(); }
+  const std::vector<Eigen::Vector3d>& points() const { return points_; }
+
+ private:
+  std::vector<Eigen::Vector3d> points_;
+};
+
 /// From p0 (d0 from obstacles) back along `flown` (commanded positions, newest last) until
 /// backoff_length_m is flown and the point keeps escape_clearance_m, or max_backoff_length_m; with
 /// no flown path (shorter than 0.3 m or backoff_length_m), back to `anchor` when p0 is within its

@@ -28,72 +28,47 @@
 //
 // Every trajectory it returns has passed a collision and feasibility check on the map it was
 // planned on (the replanner's final check; the braking trajectory is checked too, and its result
-// reported, since braking is the last safe action left).
+// reported, since braking is the last safe action left), and is cut to the known space.
 //
-// Global guidance (global_route). Every reference (a new mission, a rebuild after a stop, a retry)
-// goes through the mission's global route (path_searching GlobalRouter: A* over the whole map
-// window at the guide search's clearance, unknown space free, shortened), so the local search,
-// which samples around the reference segment, looks along it. The route is searched again when the
-// goals change, after a stop, when a remedy asks for it, and when the route check (RouteWatch,
-// route_watch.h) finds a wall newly seen across the route ahead; on a moving vehicle the rebuilt
-// reference starts from the state the next trajectory takes over at. The search runs in tick()
-// with the mutex released (it may take tens of milliseconds).
+// The FSM keeps the states, the transitions and the planning calls; it asks its units and carries
+// out what they say. Who decides what:
 //
-// No silent give-up. When the vehicle is stuck, which remedy comes next (re-route, escape,
-// back-off, stall zone, give-up) is MissionRemedies' table (mission_remedies.h); the manoeuvres
-// are manoeuvres.h's. A mission is also given up when the route search proves a goal unreachable
-// (no route through known and unknown space in its height band at its clearance, not even with the
-// region within max_backoff_length_m + 1 m of the vehicle passable at the route's end clearance,
-// e.g. out of a narrow slot it braked in; the FSM brakes if moving). The reason is in the event
-// (fallback "give_up") and in GoalStatus. Stalls with every plan succeeding are caught by
-// progress (MissionProgress: the distance left along the mission's way); the progress clock pauses
-// while the inputs are stale. At rest, failed plans are retried every rest_retry_interval_s, not
-// at every tick; moving on a trajectory that stays safe for a while, every moving_retry_interval_s.
+//   unit (header)                       decides / holds
+//   Mission (mission.h)                 the goals, the global route (searched with the mutex released,
+//                                       re-searched when the goals change, after a stop, when a remedy
+//                                       asks, or when RouteWatch sees a wall newly across it ahead), the
+//                                       minimum-snap reference, progress, the places stalled at
+//   MissionRemedies (mission_remedies.h, owned by Mission)
+//                                       which remedy when stuck: re-route, escape, back-off, stall zone,
+//                                       give-up (its table); a goal proved unreachable ends the mission too
+//   SafetyCheck (safety_check.h)        the safety thread's verdict: brake (stale inputs while moving, a
+//                                       collision too close, a trajectory running out), hold at the
+//                                       measured position (odometry jump), or replan (collision ahead)
+//   InputMonitor (input_monitor.h)      freshness of odometry and depth, stamps out of order, time jumps
+//                                       (every stored time moves with the step; the FSM replans)
+//   ServerLink (server_link.h)          does the trajectory server follow, diverge (no heartbeat, its
+//                                       watchdog stops the vehicle) or hold (re-anchor there); timing re-sync
+//   commitPlan (plan_commit.h), KnownSpaceCommitment (known_space_commitment.h)
+//                                       a plan made into what may be flown: the commanded start velocity,
+//                                       cut to a stop before unknown space (FASTER's committed part)
+//   manoeuvres.h                        the braking stop, the escape, the back-off (FlownPath), built and
+//                                       checked; the FSM decides when
 //
-// Known-space commitment (commit_to_known_space, FASTER's safe/committed split done along the
-// path). The replanner plans optimistically: unknown space counts as free, so it explores. What the
-// FSM publishes is cut to what is known: the plan is flown as planned while, at every instant, a
-// stop along its path at brake_acc_mps2 would end before the first point of the path that is not
-// observed free with all the voxels within safety_clearance_m of it observed (the ESDF counts only
-// observed obstacles: a point in seen air beside a face the camera never saw, below or beside its
-// view, would pass on distance alone), or comes within safety_clearance_m of an obstacle; from the last such instant
-// (brake_start_s) the published trajectory brakes along the same path to rest. So at every instant
-// of every published trajectory the vehicle can stop, at the planning deceleration, in space the
-// map has observed free; if no later plan comes, it does stop there. The height band of the route
-// (route.min_z_m, max_z_m) is a geofence for the committed part too: no farther out of it than the
-// plan's start (a take-off from below climbs in; a plan from inside stays inside). A new plan takes over before
-// the braking starts while the map keeps growing ahead (the FSM replans early enough), so normal
-// flight does not slow down; it slows where the camera has not seen far enough.
-//
-// Input liveness and time (InputMonitor, input_monitor.h: the freshness rules and time jumps).
-// Stale inputs: goals are refused (kInputsStale), nothing is planned, and a moving vehicle brakes to
-// a hover; the mission resumes when they are fresh again. Odometry farther than
-// max_tracking_error_m from the commanded position at its stamp (a VIO jump or relocalisation) makes
-// the FSM hold at the measured position and replan from there. A time jump (of setOdometry's
-// arrival time, tick, checkSafety) shifts every stored time by the step, so the commanded motion goes
-// on without a jump, and the FSM replans from the current state.
-//
-// The trajectory server (ServerLink, server_link.h: when the server follows, diverges or holds).
-// The commanded state is the FSM's trajectory as long as the server follows it. When it diverges,
-// the FSM publishes nothing, skips its own checks and asks the caller to send no heartbeat
-// (FsmOutput::server_diverged: the server's watchdog then stops the vehicle along its path) until
-// the server holds, then takes the hold as its commanded state (a trajectory at rest there) and
-// replans from it. Before its first trajectory the FSM starts from the server's hold rather than
-// from odometry. While the server follows, the FSM keeps its timing in step with the server's
-// setpoint. Without server setpoints, the FSM's trajectory is the commanded state.
-//
-// What it flies when it does not follow a plan (the braking stop, the escape, the back-off) is
-// built and checked by manoeuvres.h; the FSM decides when.
+// Stale inputs: goals are refused (kInputsStale), nothing is planned, a moving vehicle brakes to a
+// hover; the mission resumes when they are fresh again, and the progress clock pauses meanwhile. At
+// rest, failed plans are retried every rest_retry_interval_s; moving on a trajectory that stays safe
+// for a while, every moving_retry_interval_s. The give-up's reason is in the event (fallback
+// "give_up") and in GoalStatus.
 //
 // Threads: two callers, both may run at the same time: tick() (the planning thread: state machine
 // and planning) and checkSafety() (the safety thread: collision check of the executing trajectory and
 // the emergency stop). setOdometry()/setGoals() may come from a third. One mutex guards the state;
 // tick() releases it while it plans and commits its result only if no other trajectory (a braking
 // one) took over in the meantime. The map passed in must not change during the call (the caller
-// holds its read lock). The units the FSM decides with (InputMonitor, ServerLink, RouteWatch,
-// MissionRemedies, MissionProgress) are plain objects it owns and calls only under its mutex, from
-// whichever of the callers holds it; manoeuvres.h and KnownSpaceCommitment are functions of their
-// arguments. The replanner and the route searches run on the planning thread with the mutex released.
+// holds its read lock). The units are plain objects the FSM owns and calls only under its mutex,
+// from whichever of the callers holds it; manoeuvres.h, commitPlan and KnownSpaceCommitment are
+// functions of their arguments. The replanner and the route searches (Mission::searchRoute) run on
+// the planning thread with the mutex released.
 
 #include <cmath>
 #include <cstdint>
@@ -107,65 +82,18 @@
 #include "topo_planner/path_searching/global_router.h"
 #include "topo_planner/plan_env/grid_geometry.h"
 #include "topo_planner/topo_replan/exec_trajectory.h"
+#include "topo_planner/topo_replan/fsm_output.h"
 #include "topo_planner/topo_replan/input_monitor.h"
 #include "topo_planner/topo_replan/known_space_commitment.h"
 #include "topo_planner/topo_replan/manoeuvres.h"
-#include "topo_planner/topo_replan/mission_progress.h"
-#include "topo_planner/topo_replan/mission_remedies.h"
+#include "topo_planner/topo_replan/mission.h"
 #include "topo_planner/topo_replan/replan_fsm_config.h"
 #include "topo_planner/topo_replan/route_watch.h"
+#include "topo_planner/topo_replan/safety_check.h"
 #include "topo_planner/topo_replan/server_link.h"
 #include "topo_planner/topo_replan/topo_replanner.h"
 
 namespace topo_planner {
-
-enum class FsmState { kInit, kWaitTarget, kGenNewTraj, kExecTraj, kReplanTraj, kEmergencyStop };
-const char* toString(FsmState state);
-
-enum class GoalStatus {
-  kAccepted,
-  kNoOdometry,      ///< no (valid) odometry yet
-  kInvalidInput,    ///< empty list, NaN/inf coordinates
-  kGoalInObstacle,  ///< a goal is closer than goal_clearance_m to a known obstacle
-  kGoalOutOfMap,    ///< a goal lies outside the map window
-  kReferenceFailed, ///< no minimum-snap reference through the goals
-  kInputsStale,     ///< depth or odometry is stale or has never arrived (see InputHealth)
-  kUnreachable,     ///< the global route search proves a goal unreachable in the known map
-  kGivenUp,         ///< the mission was given up: no trajectory within its time limit (or tries)
-};
-const char* toString(GoalStatus status);
-
-/// What one call did, for logging and the ReplanEvent message.
-struct FsmEvent {
-  enum class Trigger { kNewGoal, kCollisionAhead, kPeriodic, kRetry, kEmergency, kTimeJump, kReroute };
-  Trigger trigger = Trigger::kNewGoal;
-  FsmState state = FsmState::kInit;     ///< state when it started
-  bool published = false;               ///< a new trajectory was returned
-  ReplanStatus status = ReplanStatus::kSuccess;
-  /// none | keep_current | hover_retry | stop | escape | back_off | reroute | give_up | discarded_late |
-  /// discarded_superseded
-  std::string fallback = "none";
-  std::string message;
-  Eigen::Vector3d position = Eigen::Vector3d::Zero();  ///< start of the planned trajectory
-  ReplanStats stats;
-};
-const char* toString(FsmEvent::Trigger trigger);
-
-struct FsmOutput {
-  std::optional<ExecTrajectory> trajectory;       ///< publish this (already checked)
-  std::optional<FsmEvent> event;                  ///< a planning call happened
-  std::optional<ReplanResult> plan;               ///< its full result (candidates etc., for rviz)
-  bool new_reference = false;                     ///< reference() changed
-  bool new_route = false;                         ///< route() changed
-  bool goal_reached = false;                      ///< the last goal of the mission was reached
-  /// Odometry jumped away from the commanded state (a VIO relocalisation): the map built in the old
-  /// frame no longer lines up with the new one; the caller may forget it.
-  bool odometry_jumped = false;
-  /// The trajectory server does not follow the commanded trajectory: the caller sends no heartbeat
-  /// (the server's watchdog then stops the vehicle) until the FSM has re-anchored on its hold.
-  bool server_diverged = false;
-  std::string message;                            ///< a notable transition, for the log
-};
 
 class ReplanFsm {
  public:
@@ -226,18 +154,6 @@ class ReplanFsm {
   static TopoReplanner::Config replannerConfig(const Config& config);
   /// The speed the plans aim at (see sensing_range_m): the optimiser's max_vel, or less [m/s].
   static double cruiseSpeed(const Config& config);
-  /// The known-space commitment's settings of a config (its clearance, margin, back-up deceleration, band).
-  static KnownSpaceCommitment::Config commitmentConfig(const Config& config);
-  /// The mission remedies' settings of a config.
-  static MissionRemedies::Config remediesConfig(const Config& config);
-  /// The route check's settings of a config.
-  static RouteWatch::Config routeWatchConfig(const Config& config);
-  /// The trajectory server link's settings of a config.
-  static ServerLink::Config serverLinkConfig(const Config& config);
-  /// The input liveness and clock settings of a config.
-  static InputMonitor::Config inputMonitorConfig(const Config& config);
-  /// The settings of its manoeuvres (braking, escape, back-off) of a config.
-  static ManoeuvreConfig manoeuvreConfig(const Config& config);
   using PlanObserver = std::function<void(const EsdfMap&, const ReplanRequest&, const ReplanResult&)>;
   void setPlanObserver(PlanObserver observer) { plan_observer_ = std::move(observer); }
   /// The safety thread: checks the executing trajectory from t; flags a replan when it collides,
@@ -263,9 +179,8 @@ class ReplanFsm {
   /// The reference's limits, its speed no more than cruiseSpeed().
   ReferenceConfig referenceConfigLocked() const;
   void applyPendingConfigLocked(FsmOutput* out);
+  /// Takes up the mission's pending goals: a new reference (GEN_NEW_TRAJ), or false (refused, said why).
   bool startGoalsLocked(double t, const EsdfMap& map, FsmOutput* out);
-  /// Goals against the map: kAccepted, or kGoalOutOfMap / kGoalInObstacle with why (goal index).
-  GoalStatus checkGoalsLocked(const std::vector<Eigen::Vector3d>& goals, const EsdfMap& map, std::string* why) const;
   /// setGoals() once the goals passed its checks.
   GoalStatus acceptGoalsLocked(const std::vector<Eigen::Vector3d>& goals);
   /// The commanded state at t_takeover: on the current trajectory, or on the one it replaced when
@@ -284,11 +199,6 @@ class ReplanFsm {
   /// (odometry jump), at brake_acc_mps2 only.
   ExecTrajectory brakingTrajectoryLocked(double t, const EsdfMap& map, std::string* report,
                                          const FlatState* from = nullptr) const;
-  /// The known-space commitment of a plan starting at t0 (KnownSpaceCommitment): fills traj->spline,
-  /// brake_start_s, stops_before_unknown and the heading target; false (with why) when the cut
-  /// trajectory cannot be built or fails its check.
-  bool commitToKnownSpace(const UniformBspline& plan, double t0, const EsdfMap& map, ExecTrajectory* traj,
-                          std::string* why) const;
   /// Clock bookkeeping of every entry point: detects a time jump and shifts the stored times.
   void observeClockLocked(double now, FsmOutput* out);
   /// The trajectory server does not follow this FSM's trajectory (see the class comment): true when
@@ -297,7 +207,6 @@ class ReplanFsm {
   /// Brakes now for `reason` (stale input, odometry jump): publishes the stop, EMERGENCY_STOP.
   void emergencyStopLocked(double t, const EsdfMap& map, const std::string& reason, FsmOutput* out,
                            const FlatState* from, ReplanStatus status);
-  std::vector<Eigen::Vector3d> remainingGoalsLocked() const;
   /// The global route for the goals the next reference will go through, when it is stale (mutex
   /// released during the search); gives the mission up when the route proves a goal unreachable.
   /// *searched_until: the clock (now(), or t) when a search ended; untouched when none ran.
@@ -309,8 +218,11 @@ class ReplanFsm {
   /// The stall rule (Config::progress_timeout_s), once per tick before the state machine: true when
   /// it acted (re-route, stop, back-off or give-up) and the tick ends there.
   bool handleStallLocked(double t, const EsdfMap& map, FsmOutput* out);
-  /// A place stalled at, for every later route search (the oldest dropped beyond kMaxStallZones).
-  void addStallZoneLocked(const GlobalRouter::Zone& zone);
+  /// The back-off from the commanded state at t (manoeuvres.h backoffTrajectory), if one is possible.
+  std::optional<ExecTrajectory> backoffLocked(double t, const EsdfMap& map, std::string* report,
+                                              bool* to_anchor = nullptr) const;
+  /// No trajectory runs at t (none, or it has ended) and the vehicle is measured at rest.
+  bool atRestLocked(double t) const;
   /// The mission's reference could not be rebuilt (startGoalsLocked refused its remaining goals):
   /// goals now invalid end the mission (give_up, saying why); a reference that failed its limits is
   /// rebuilt from rest (a moving vehicle stops first) instead of dropping the mission.
@@ -322,8 +234,30 @@ class ReplanFsm {
   /// Ends the mission for `why` (braking first when moving), with a give_up event.
   void giveUpLocked(double t, const EsdfMap& map, GoalStatus status, ReplanStatus replan_status, const std::string& why,
                     FsmOutput* out);
-  void plan(double t, const EsdfMap& map, FsmEvent::Trigger trigger, std::unique_lock<std::mutex>* lock,
-            FsmOutput* out, const std::function<double()>& now);
+  /// What one tick() works with: its time and map, the lock it holds, its output, the clock.
+  struct Tick {
+    double t;
+    const EsdfMap& map;
+    std::unique_lock<std::mutex>* lock;
+    FsmOutput* out;
+    const std::function<double()>& now;
+  };
+  /// EXEC_TRAJ / REPLAN_TRAJ at a tick: new goals, the goal reached, or a replan when the trajectory
+  /// collides ahead, runs out, or is due (replan_interval_s); `jumped`: after a time jump.
+  void execTrajLocked(const Tick& tick, bool jumped);
+  /// EMERGENCY_STOP at a tick: once at rest, a new reference from there through the goals left.
+  void stoppedLocked(const Tick& tick);
+  /// One planning call (mutex released while the replanner runs): the plan is committed
+  /// (plan_commit.h) and published, or what a failure calls for is done.
+  void plan(const Tick& tick, FsmEvent::Trigger trigger);
+  /// A committed plan on time: published, unless the holds at the edge of the known space call for
+  /// a back-off or the give-up.
+  void planSucceededLocked(double t, const EsdfMap& map, const ReplanRequest& request, ExecTrajectory traj,
+                           FsmEvent* event, FsmOutput* out);
+  /// A failed (or late, or superseded) plan with `status`, finished at `finished`: keep the current
+  /// trajectory, retry, escape, back off, re-route or give up (MissionRemedies).
+  void planFailedLocked(double t, const EsdfMap& map, ReplanStatus status, FsmEvent::Trigger trigger, bool superseded,
+                        double finished, FsmEvent* event, FsmOutput* out);
 
   Config config_;
   std::optional<Config> pending_config_;  // reconfigure(): applied at the next tick
@@ -337,31 +271,16 @@ class ReplanFsm {
   bool time_jumped_ = false;      // set by observeClockLocked, consumed by tick (replan)
   double time_jump_clock_s_ = 0.0;  // the clock when the last jump was seen
   bool inputs_reported_ = false;  // the stale-input message was given (once per episode)
-  size_t next_goal_ = 0;          // goals_[next_goal_..] are not reached yet
   Eigen::Vector3d odom_position_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d odom_velocity_ = Eigen::Vector3d::Zero();
-  std::vector<Eigen::Vector3d> pending_goals_;  // set by setGoals, consumed by tick
-  bool goals_pending_ = false;
-  std::vector<Eigen::Vector3d> goals_;          // the current mission
-  GoalStatus last_goal_status_ = GoalStatus::kAccepted;
-  PolynomialTrajectory reference_;
   std::optional<ExecTrajectory> current_;
   std::optional<ExecTrajectory> previous_;  // the one current_ replaced: flown until current_ starts
   int64_t next_id_ = 0;
   ServerLink server_;  // the trajectory server's latest setpoint: does it follow?
+  SafetyCheck safety_;  // the safety thread's rules
   bool collision_ahead_ = false;  // set by checkSafety, consumed by tick
-  // Global guidance and strategies.
-  std::unique_ptr<GlobalRouter> router_;  // used by tick() only, outside the lock
-  std::unique_ptr<GlobalRouter> start_router_;  // ... relaxed farther from the start: the proof of unreachability
-  Path route_;                            // through route_goals_; empty: straight references
-  std::vector<Eigen::Vector3d> route_goals_;
-  RouteWatch route_watch_;                // the route check of route_ (reset with it)
-  MissionRemedies remedies_;              // failures, holds, stalls and back-offs: which remedy next
-  double route_checked_s_ = -INFINITY;
-  std::string reroute_reason_;            // why the pending re-route: said in its planning call's event
-  bool route_stale_ = true;
-  bool rerouting_ = false;                // the pending goals are a re-route of the mission
-  std::vector<Eigen::Vector3d> flown_;    // commanded positions 0.25 m apart, newest last (back-offs)
+  Mission mission_;  // goals, route, reference, progress, stall zones and remedies
+  FlownPath flown_;                       // what the back-offs walk back along
   // Where the vehicle hovers without having been flown there by a committed trajectory (a mission's
   // start, a re-anchoring): the known-space commitment counts known_start_radius_m around it as known.
   std::optional<Eigen::Vector3d> known_anchor_;
@@ -369,14 +288,8 @@ class ReplanFsm {
   // (forgotten, or wrong by the jump), so the hover where it ends was not flown to through known
   // space either; the anchor moves there once the vehicle is at rest.
   bool anchor_at_rest_ = false;
-  bool new_mission_ = false;              // set by setGoals: the next started reference begins a mission
-  uint64_t route_epoch_ = 0;              // bumped by setGoals, stops and odometry jumps: a route searched before is stale
-  MissionProgress progress_;              // the distance left along the mission's way
   double rest_retry_after_s_ = -INFINITY; // a failed plan at rest is tried again from then
   double moving_retry_after_s_ = -INFINITY;  // a failed periodic replan of a safe trajectory: from then
-  double progress_tick_s_ = NAN;          // the last tick that measured progress (or paused it) [s]
-  std::vector<GlobalRouter::Zone> stall_zones_;  // where missions stalled: later route searches avoid them
-  static constexpr size_t kMaxStallZones = 32;
   double takeover_delay_s_;       // the adaptive takeover delay (tick() only writes it, under the mutex)
 };
 

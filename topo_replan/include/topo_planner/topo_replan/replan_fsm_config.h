@@ -1,12 +1,20 @@
 #pragma once
 // The replanning FSM's settings (ReplanFsm::Config) and their validation: every field with its
-// default, unit and why. The FSM hands each of its units the part it needs (ReplanFsm::*Config(),
-// defined in replan_fsm_config.cpp with the validation).
+// default, unit and why. The FSM hands each of its units the part it needs (the functions at the
+// end, defined in replan_fsm_config.cpp with the validation).
 
 #include <string>
 
 #include "topo_planner/path_searching/global_router.h"
+#include "topo_planner/topo_replan/input_monitor.h"
+#include "topo_planner/topo_replan/known_space_commitment.h"
+#include "topo_planner/topo_replan/manoeuvres.h"
+#include "topo_planner/topo_replan/mission_remedies.h"
+#include "topo_planner/topo_replan/plan_commit.h"
 #include "topo_planner/topo_replan/polynomial_trajectory.h"
+#include "topo_planner/topo_replan/route_watch.h"
+#include "topo_planner/topo_replan/safety_check.h"
+#include "topo_planner/topo_replan/server_link.h"
 #include "topo_planner/topo_replan/topo_replanner.h"
 
 namespace topo_planner {
@@ -132,6 +140,16 @@ struct ReplanFsmConfig {
   double server_position_tolerance_m = 0.1;
 
   bool validate(std::string* why) const;
+
+  // The settings of each unit.
+  KnownSpaceCommitment::Config commitment() const;  ///< its clearance, margin, back-up deceleration, band
+  MissionRemedies::Config remedies() const;
+  RouteWatch::Config routeWatch() const;
+  ServerLink::Config serverLink() const;
+  InputMonitor::Config inputMonitor() const;
+  ManoeuvreConfig manoeuvres() const;  ///< braking, escape, back-off
+  SafetyCheck::Config safetyCheck() const;
+  PlanCommitConfig planCommit() const;
 };
 
 }  // namespace topo_planner
