@@ -182,8 +182,7 @@ Mission::Started Mission::start(double t, FlatState start, const EsdfMap& map, c
 
 double Mission::localGoalLimit(double from_s) const {
   if (next_goal_ + 1 >= goals_.size() || reference_.empty()) return NAN;
-  const double t_pass = waypointPassTime(reference_, goals_[next_goal_], from_s, config_.waypoint_reached_radius_m);
-  return std::isfinite(t_pass) ? t_pass : NAN;
+  return waypointPassTime(reference_, goals_[next_goal_], from_s, config_.waypoint_reached_radius_m);
 }
 
 // --- The global route ----------------------------------------------------------------------------
@@ -280,10 +279,13 @@ void Mission::invalidateRoute() {
   ++route_epoch_;
 }
 
+bool Mission::routeCheckDue(double t) const {
+  return config_.global_route && config_.route_check_length_m > 0.0 && !route_watch_.empty() && !goals_.empty() &&
+         route_goals_ == remaining() && t - route_checked_s_ >= config_.route_check_interval_s;
+}
+
 bool Mission::routeBlocked(double t, const Eigen::Vector3d& position, const EsdfMap& map, std::string* text) {
-  if (!config_.global_route || !(config_.route_check_length_m > 0.0) || route_watch_.empty() || goals_.empty() ||
-      route_goals_ != remaining() || t - route_checked_s_ < config_.route_check_interval_s)
-    return false;
+  if (!routeCheckDue(t)) return false;
   route_checked_s_ = t;
   const std::optional<RouteWatch::Blocked> blocked = route_watch_.check(position, map);
   if (!blocked) return false;
@@ -303,8 +305,7 @@ std::string Mission::takeRerouteReason() { return std::exchange(reroute_reason_,
 
 Mission::Stall Mission::checkProgress(double t, const Eigen::Vector3d& position, bool stopped, bool manoeuvring) {
   Stall stall;
-  if (!config_.global_route || !(config_.progress_timeout_s > 0.0) || !progress_.active() || goals_.empty())
-    return stall;
+  if (!checksProgress()) return stall;
   progress_.update(t, position);
   progress_tick_s_ = t;
   remedies_.progressMeasured(progress_.lastGain());  // progress: the remedies start over
@@ -341,6 +342,10 @@ Mission::Stall Mission::checkProgress(double t, const Eigen::Vector3d& position,
   stall.why = text;
   stall.backs_off = remedies_.stallBacksOff();
   return stall;
+}
+
+bool Mission::checksProgress() const {
+  return config_.global_route && config_.progress_timeout_s > 0.0 && progress_.active() && !goals_.empty();
 }
 
 void Mission::stalledAtHold() {

@@ -146,7 +146,7 @@ bool ReplanFsm::atRestLocked(double t) const {
 bool ReplanFsm::handleStallLocked(double t, const EsdfMap& map, FsmOutput* out) {
   const bool flying = state_ == FsmState::kGenNewTraj || state_ == FsmState::kExecTraj ||
                       state_ == FsmState::kReplanTraj || state_ == FsmState::kEmergencyStop;
-  if (!flying) return false;
+  if (!flying || !mission_.checksProgress()) return false;
   const FlatState here = takeoverStateLocked(t);
   const bool at_rest = atRestLocked(t);
   const bool manoeuvring = current_ && current_->manoeuvre() && t < current_->endTime();
@@ -227,7 +227,8 @@ void ReplanFsm::giveUpLocked(double t, const EsdfMap& map, GoalStatus status, Re
 
 bool ReplanFsm::routeBlockedLocked(double t, const EsdfMap& map, FsmOutput* out) {
   std::string text;
-  if (!mission_.routeBlocked(t, takeoverStateLocked(t).position, map, &text)) return false;
+  if (!mission_.routeCheckDue(t) || !mission_.routeBlocked(t, takeoverStateLocked(t).position, map, &text))
+    return false;
   out->say(text);
   return true;
 }

@@ -12,11 +12,11 @@ SafetyCheck::Verdict SafetyCheck::check(double t, const Flown& flown, const Odom
   const ExecTrajectory& current = *flown.current;
   auto commanded = [&](double s) { return flownAt(current, flown.previous, s).stateAt(s); };
   Verdict v;
-  const bool active = t < current.endTime();
-  const double commanded_speed = active ? commanded(t).velocity.norm() : 0.0;
+  // At rest past the trajectory's end (stateAt), so a trajectory that ended counts as stopped.
+  const double speed = commanded(t).velocity.norm();
   // Stale inputs: a moving vehicle brakes to a hover (a braking trajectory already does).
   if (stale) {
-    if (!current.braking && commanded_speed > config_.stopped_speed_mps) {
+    if (!current.braking && speed > config_.stopped_speed_mps) {
       v.action = Verdict::Action::kBrake;
       v.why = "inputs stale (" + *stale + ")";
       v.status = ReplanStatus::kInvalidInput;
@@ -51,7 +51,6 @@ SafetyCheck::Verdict SafetyCheck::check(double t, const Flown& flown, const Odom
   // deceleration every committed plan keeps still ends before it: a collision seen at the end of a
   // plan cut before unknown space (a tree behind the edge of what was seen, a voxel that turned
   // occupied) is a replan's business, not an emergency stop's.
-  const double speed = commanded(t).velocity.norm();
   const double hit = firstCollisionTime(current, t, map, config_.safety_clearance_m, config_.safety_sample_s);
   const double end_speed = current.spline.derivative().evaluate(std::max(0.0, current.spline.duration() - 1e-6)).norm();
   const bool runs_out = !current.ends_at_goal && end_speed > config_.stopped_speed_mps &&

@@ -110,7 +110,7 @@ class Mission {
   Started start(double t, FlatState start, const EsdfMap& map, const ReferenceConfig& limits);
   const PolynomialTrajectory& reference() const { return reference_; }
   /// The reference time at which it passes the next intermediate goal (within
-  /// waypoint_reached_radius_m), after `from_s`: the local goal stays before it. NaN: none.
+  /// waypoint_reached_radius_m), after `from_s`: the local goal stays before it. Not finite: none.
   double localGoalLimit(double from_s) const;
 
   // --- The global route ------------------------------------------------------------------------
@@ -152,9 +152,12 @@ class Mission {
   /// The route is searched again at the next reference.
   void markRouteStale() { route_stale_ = true; }
   const Path& route() const { return route_; }
-  /// The route check (route_check_length_m, every route_check_interval_s) of the vehicle at
-  /// `position` at time t: true when the map shows a part of the route ahead newly blocked; the
-  /// re-route is then pending, its reason in *text and in takeRerouteReason().
+  /// The route check is due at t (route_check_length_m on, a route for the goals left, and
+  /// route_check_interval_s since the last one): the caller works out the position only then.
+  bool routeCheckDue(double t) const;
+  /// The route check of the vehicle at `position` at time t (when due): true when the map shows a
+  /// part of the route ahead newly blocked; the re-route is then pending, its reason in *text and in
+  /// takeRerouteReason().
   bool routeBlocked(double t, const Eigen::Vector3d& position, const EsdfMap& map, std::string* text);
   /// Why the pending re-route (said once, in its planning call's event); empty when none.
   std::string takeRerouteReason();
@@ -172,6 +175,9 @@ class Mission {
     std::string why;
     bool backs_off = false;  ///< kRemedy: back off (stopping first when moving), else re-route
   };
+  /// The stall rule applies (global_route, progress_timeout_s on, a mission being tracked): the
+  /// caller works out the position only then.
+  bool checksProgress() const;
   /// The stall rule (progress_timeout_s) with the vehicle flying at `position` at time t: measures
   /// the progress and says which remedy is due. `stopped` when the vehicle is at rest in a stop,
   /// `manoeuvring` when a manoeuvre is under way.
@@ -187,7 +193,6 @@ class Mission {
   /// A time jump: every time of the old clock moves by dt.
   void shift(double dt);
   MissionRemedies& remedies() { return remedies_; }
-  const MissionRemedies& remedies() const { return remedies_; }
 
  private:
   void addStallZone(const Eigen::Vector3d& center);
