@@ -16,6 +16,7 @@ for method in proposed gto gto_restart astar_pgo; do
   done
   # Sum over maps: tasks, solved, and the time distribution.
   cat "$out/$method"/map*/summary.csv | grep -v '^trial' > "$out/$method/all.csv" || true
+  head -1 "$(ls "$out/$method"/map*/summary.csv | head -1)" > "$out/$method/header.csv"
   /usr/bin/python3 - "$method" "$out/$method/all.csv" <<'PY'
 import sys, statistics
 method, path = sys.argv[1], sys.argv[2]
@@ -27,3 +28,17 @@ print('| %s | %d | %.2f%% | %.3f | %.3f |' % (method, len(rows), 100.0 * len(ok)
       statistics.median(t) if t else 0.0, p95))
 PY
 done
+# Where the proposed method's time goes, over every map: the per-call phases (bench_replan's
+# summary.csv columns after num_paths), median and p95.
+/usr/bin/python3 - "$out/proposed/header.csv" "$out/proposed/all.csv" <<'PY'
+import csv, sys, statistics
+names = next(csv.reader(open(sys.argv[1])))[7:]
+rows = [l.strip().split(',') for l in open(sys.argv[2]) if l.strip()]
+def pct(v, q):
+    v = sorted(v)
+    return v[min(len(v) - 1, int(q * (len(v) - 1) + 0.5))] if v else 0.0
+print('\n| proposed, phase per call | median | p95 | mean |\n|---|---|---|---|')
+for k, name in enumerate(names):
+    v = [float(r[7 + k]) for r in rows if len(r) > 7 + k]
+    print('| %s | %.3f | %.3f | %.3f |' % (name, pct(v, 0.5), pct(v, 0.95), sum(v) / max(1, len(v))))
+PY

@@ -75,7 +75,9 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "bench_replan: cannot write to %s (does the directory exist?)\n", out_dir.c_str());
     return 1;
   }
-  summary << "trial,map_id,ok,topo_ms,opt_ms,total_ms,num_paths\n" << std::fixed << std::setprecision(4);
+  summary << "trial,map_id,ok,topo_ms,opt_ms,total_ms,num_paths";
+  for (const auto& field : bench::PhaseTimes::fields()) summary << ",\"" << field.first << "\"";
+  summary << "\n" << std::fixed << std::setprecision(4);
 
   std::vector<bench::ReplanTask> task_list;
   const bench::TasksCsvStats csv = bench::readTasksCsv(tasks, &task_list);
@@ -84,6 +86,7 @@ int main(int argc, char** argv) {
   bench::MethodRunner runner(suite);
 
   std::vector<double> total_ms, jerk;
+  std::vector<bench::TaskOutcome> outcomes;  // for the phase table (trajectories dropped)
   int tasks_run = 0, solved = 0;
   const int bad_rows = csv.bad_rows;
   for (const bench::ReplanTask& task : task_list) {
@@ -96,7 +99,11 @@ int main(int argc, char** argv) {
       o = runner.run(method, *esdf, reference, uint32_t(trial));
     ++tasks_run;
     summary << trial << "," << id << "," << int(o.ok) << "," << o.search_ms << "," << o.opt_ms << "," << o.total_ms << ","
-            << o.paths << "\n";
+            << o.paths;
+    for (const auto& field : bench::PhaseTimes::fields()) summary << "," << o.phases.*(field.second);
+    summary << "\n";
+    outcomes.push_back(o);
+    outcomes.back().trajectory = UniformBspline();
     total_ms.push_back(o.total_ms);
     if (o.ok) {
       ++solved;
@@ -121,6 +128,7 @@ int main(int argc, char** argv) {
   std::printf("| method | tasks | success | total ms median | p95 | jerk integral mean (solved) |\n|---|---|---|---|---|---|\n");
   std::printf("| %s | %d | %.2f%% | %.3f | %.3f | %.3f |\n", bench::toString(method), tasks_run,
               tasks_run ? 100.0 * solved / tasks_run : 0.0, percentile(total_ms, 0.5), percentile(total_ms, 0.95), jerk_mean);
+  if (method == bench::Method::kProposed) std::printf("\n%s\n", bench::phaseTable(outcomes).c_str());
   std::printf("RESULT method=%s tasks=%d success=%.4f total_ms_median=%.3f total_ms_p95=%.3f jerk_mean=%.3f\n",
               bench::toString(method), tasks_run, tasks_run ? double(solved) / tasks_run : 0.0, percentile(total_ms, 0.5),
               percentile(total_ms, 0.95), jerk_mean);

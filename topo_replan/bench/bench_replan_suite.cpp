@@ -26,6 +26,12 @@ TEST(ReplanSuite, TableI) {
   std::printf("\n%s\n", table.c_str());
   EXPECT_TRUE(bench::writeCsv(outcomes, g_out + "/replan_tasks.csv")) << "cannot write " << g_out;
   std::ofstream(g_out + "/replan_table1.md") << table;
+  for (const char* density : {"low", "medium", "high"}) {
+    std::vector<bench::TaskOutcome> of;
+    for (const bench::TaskOutcome& o : outcomes)
+      if (o.density == density && o.method == bench::Method::kProposed) of.push_back(o);
+    std::printf("Where the proposed method's time goes, %s density:\n%s\n", density, bench::phaseTable(of).c_str());
+  }
   int common_gto = 0;
   const double ratio = bench::jerkRatio(outcomes, bench::Method::kProposed, bench::Method::kGto, &common_gto);
   auto rate = [&](const char* d, bench::Method m) { return summary.at(d).at(m).successRate(); };

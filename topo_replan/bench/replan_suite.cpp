@@ -79,6 +79,21 @@ TaskOutcome runMethod(Method method, TopoReplanner& replanner, const PathGuidedO
     out.opt_ms = r.stats.optimize_ms;
     out.total_ms = r.stats.total_ms;
     out.paths = r.stats.paths;
+    PhaseTimes& ph = out.phases;
+    ph.local_problem_ms = r.stats.check_ms;
+    ph.roadmap_ms = r.stats.search.roadmap_ms;
+    ph.extraction_ms = r.stats.search.extraction_ms;
+    ph.shortening_ms = r.stats.search.shortening_ms;
+    ph.pruning_ms = r.stats.search.pruning_ms;
+    if (r.stats.used_astar) ph.astar_ms = std::max(0.0, r.stats.search_ms - r.stats.search.total_ms);
+    ph.optimize_wall_ms = r.stats.optimize_ms;
+    for (const ReplanCandidate& c : r.candidates) {
+      ph.guide_ms += c.result.stats.phase1_ms;
+      ph.refine_ms += c.result.stats.phase2_ms;
+      ph.final_check_ms += c.result.stats.check_ms;
+      ph.evaluations += c.result.stats.iterations;
+      ph.refine_runs += c.result.stats.runs;
+    }
     if (out.ok) {
       out.trajectory = r.trajectory;
       out.min_clearance_m = r.chosen >= 0 ? r.candidates[size_t(r.chosen)].result.stats.min_clearance_m
@@ -127,6 +142,39 @@ TaskOutcome runMethod(Method method, TopoReplanner& replanner, const PathGuidedO
     out.duration_s = out.trajectory.duration();
   }
   return out;
+}
+
+const std::vector<std::pair<const char*, double PhaseTimes::*>>& PhaseTimes::fields() {
+  static const std::vector<std::pair<const char*, double PhaseTimes::*>> f{
+      {"local problem ms", &PhaseTimes::local_problem_ms},
+      {"roadmap ms (sampling + visibility + UVD)", &PhaseTimes::roadmap_ms},
+      {"path extraction ms", &PhaseTimes::extraction_ms},
+      {"shortening ms", &PhaseTimes::shortening_ms},
+      {"pruning ms", &PhaseTimes::pruning_ms},
+      {"A* last resort ms", &PhaseTimes::astar_ms},
+      {"guide phase ms (sum over candidates)", &PhaseTimes::guide_ms},
+      {"refine phase ms (sum)", &PhaseTimes::refine_ms},
+      {"final check ms (sum)", &PhaseTimes::final_check_ms},
+      {"optimisation wall ms", &PhaseTimes::optimize_wall_ms},
+      {"refine evaluations (sum)", &PhaseTimes::evaluations},
+      {"refine runs (sum)", &PhaseTimes::refine_runs},
+  };
+  return f;
+}
+
+std::string phaseTable(const std::vector<TaskOutcome>& outcomes) {
+  std::ostringstream t;
+  t << "| phase (per call) | median | p95 | mean |\n|---|---|---|---|\n" << std::fixed << std::setprecision(3);
+  for (const auto& [name, field] : PhaseTimes::fields()) {
+    std::vector<double> v;
+    for (const TaskOutcome& o : outcomes)
+      if (o.method == Method::kProposed) v.push_back(o.phases.*field);
+    double sum = 0.0;
+    for (double x : v) sum += x;
+    t << "| " << name << " | " << percentile(v, 0.5) << " | " << percentile(v, 0.95) << " | "
+      << (v.empty() ? 0.0 : sum / double(v.size())) << " |\n";
+  }
+  return t.str();
 }
 
 MethodRunner::MethodRunner(const SuiteConfig& suite)

@@ -41,6 +41,25 @@ struct SuiteConfig {
   int collision_retries = -1;     ///< PGO's collision retries; -1: the optimiser's default
 };
 
+/// Where a proposed replan's time went, per call (the profile of the issue on sub-millisecond
+/// replanning). The optimisation's phases are summed over its candidates (CPU time on the pool's
+/// workers); optimize_wall_ms is the parallel section's wall time, thread hand-off included.
+struct PhaseTimes {
+  double local_problem_ms = 0.0;  ///< reference check, local problem, initial spline
+  double roadmap_ms = 0.0;        ///< Alg. 1: sampling, visibility, UVD
+  double extraction_ms = 0.0, shortening_ms = 0.0, pruning_ms = 0.0;
+  double astar_ms = 0.0;          ///< the A* last resort, when it ran
+  double guide_ms = 0.0;          ///< PGO phase 1 (closed form)
+  double refine_ms = 0.0;         ///< PGO phase 2 (NLopt), every run
+  double final_check_ms = 0.0;    ///< reallocation and the curve check
+  double optimize_wall_ms = 0.0;
+  double evaluations = 0.0;       ///< phase-2 objective evaluations, every candidate and run
+  double refine_runs = 0.0;
+
+  /// Names and pointers of the fields, in print order.
+  static const std::vector<std::pair<const char*, double PhaseTimes::*>>& fields();
+};
+
 struct TaskOutcome {
   std::string density;
   int trial = 0;
@@ -49,9 +68,13 @@ struct TaskOutcome {
   std::string status;
   double search_ms = 0.0, opt_ms = 0.0, total_ms = 0.0;
   int paths = 0;
+  PhaseTimes phases;  ///< the proposed method's only
   double jerk_integral = 0.0, duration_s = 0.0, min_clearance_m = 0.0;
   UniformBspline trajectory;
 };
+
+/// A Markdown table of the phases' medians and p95s over `outcomes` (the proposed method's).
+std::string phaseTable(const std::vector<TaskOutcome>& outcomes);
 
 /// The replanner configuration used by every method (optimiser, search, A*).
 TopoReplanner::Config benchmarkReplannerConfig(const SuiteConfig& suite);
