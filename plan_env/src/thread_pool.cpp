@@ -18,37 +18,50 @@ ThreadPool::~ThreadPool() {
   for (auto& t : threads_) t.join();
 }
 
-void ThreadPool::runTasks(int worker) {
-  for (int task = next_task_.fetch_add(1); task < num_tasks_; task = next_task_.fetch_add(1)) {
+void ThreadPool::runTasks(uint32_t call, int num_tasks, const Job& job, int worker) {
+  uint64_t claim = claim_.load();
+  for (;;) {
+    // A task is claimed for its own call only: a worker that woke after its call ended (and maybe
+    // after the next one began) claims nothing, so `job` is never run once its call has returned.
+    if (uint32_t(claim >> 32) != call || int(uint32_t(claim)) >= num_tasks) return;
+    if (!claim_.compare_exchange_weak(claim, claim + 1)) continue;
     try {
-      (*job_)(task, worker);
+      job(int(uint32_t(claim)), worker);
     } catch (...) {  // kept for the caller; the other tasks still run, so nobody waits forever
       std::lock_guard<std::mutex> lock(mutex_);
       if (!error_) error_ = std::current_exception();
     }
+    if (done_.fetch_add(1) + 1 == num_tasks) {
+      std::lock_guard<std::mutex> lock(mutex_);  // the caller is waiting or about to check done_
+      done_cv_.notify_one();
+    }
+    claim = claim_.load();
   }
 }
 
-void ThreadPool::parallelFor(int num_tasks, const std::function<void(int, int)>& fn) {
+void ThreadPool::parallelFor(int num_tasks, const Job& fn) {
   if (num_tasks <= 0) return;
   std::lock_guard<std::mutex> call_lock(call_mutex_);
   if (threads_.empty() || num_tasks == 1) {  // inline; an exception propagates directly
     for (int t = 0; t < num_tasks; ++t) fn(t, 0);
     return;
   }
+  uint32_t call;
   {
     std::lock_guard<std::mutex> lock(mutex_);
+    call = ++call_;
     job_ = &fn;
-    error_ = nullptr;
     num_tasks_ = num_tasks;
-    next_task_.store(0);
-    busy_workers_ = int(threads_.size());
-    ++generation_;
+    error_ = nullptr;
+    done_.store(0);
+    claim_.store(uint64_t(call) << 32);
   }
   start_cv_.notify_all();
-  runTasks(0);
+  runTasks(call, num_tasks, fn, 0);
+  // Wait for the tasks the workers claimed, not for the workers: one still asleep has claimed none,
+  // and waking a sleeping thread takes 0.1-20 ms on a loaded or virtual machine.
   std::unique_lock<std::mutex> lock(mutex_);
-  done_cv_.wait(lock, [this] { return busy_workers_ == 0; });
+  done_cv_.wait(lock, [&] { return done_.load() == num_tasks; });
   job_ = nullptr;
   if (error_) {
     std::exception_ptr e = error_;
@@ -59,20 +72,19 @@ void ThreadPool::parallelFor(int num_tasks, const std::function<void(int, int)>&
 }
 
 void ThreadPool::workerLoop(int worker) {
-  uint64_t seen = 0;
+  uint32_t seen = 0;
   for (;;) {
+    const Job* job = nullptr;
+    int num_tasks = 0;
     {
       std::unique_lock<std::mutex> lock(mutex_);
-      start_cv_.wait(lock, [&] { return stop_ || generation_ != seen; });
+      start_cv_.wait(lock, [&] { return stop_ || call_ != seen; });
       if (stop_) return;
-      seen = generation_;
+      seen = call_;
+      job = job_;  // null when that call has already ended
+      num_tasks = num_tasks_;
     }
-    runTasks(worker);
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      --busy_workers_;
-    }
-    done_cv_.notify_one();
+    if (job) runTasks(seen, num_tasks, *job, worker);
   }
 }
 

@@ -43,6 +43,25 @@ TEST(ThreadPool, WorkerIndexIsExclusive) {
   EXPECT_EQ(sum.load(), 50 * (63 * 64 / 2));
 }
 
+// Back-to-back calls with their state on the stack: a worker that wakes late must not run a task
+// of a call that has returned (it would count in the next call's hits, or touch a dead frame under
+// AddressSanitizer). Run under ThreadSanitizer too.
+TEST(ThreadPool, NoTaskRunsAfterItsCallReturned) {
+  ThreadPool pool(3);
+  for (int round = 0; round < 20000; ++round) {
+    const int n = 2 + round % 4;
+    std::atomic<bool> open{true};
+    std::atomic<int> hits{0}, late{0};
+    pool.parallelFor(n, [&](int, int) {
+      if (!open.load()) late.fetch_add(1);
+      hits.fetch_add(1);
+    });
+    open = false;
+    ASSERT_EQ(hits.load(), n) << "round " << round;
+    ASSERT_EQ(late.load(), 0) << "round " << round;
+  }
+}
+
 TEST(ThreadPool, ConcurrentCallersAreSerialised) {
   ThreadPool pool(2);
   std::atomic<int> total{0};
