@@ -99,9 +99,77 @@ struct RefineProblem {
   double best_cost = std::numeric_limits<double>::infinity();
   std::vector<double> best_x;
 
-  void unpack(const double* x) {
-    for (int i = first; i <= last; ++i)
-      for (int c = 0; c < 3; ++c) q(i, c) = x[3 * (i - first) + c];
+  // The preconditioner (Config::precondition): the lower banded Cholesky factor L of the
+  // smoothness Hessian over the free points, L(i, i) = l0(i), L(i, i-1) = l1(i), L(i, i-2) = l2(i).
+  // The solver's variables are y = L^T x (x: the free control points, a column per axis).
+  bool preconditioned = false;
+  Eigen::VectorXd l0, l1, l2;
+
+  // The Hessian of sum ||Q_{i+1} - 2 Q_i + Q_{i-1}||^2 over the free points (with the fixed ends),
+  // times 2 l2s, factored in place. False (no preconditioning) when it is not positive definite.
+  bool factorSmoothness(int n, double l2s) {
+    const int m = last - first + 1;
+    if (!(l2s > 0.0) || m < 1) return false;
+    l0 = Eigen::VectorXd::Zero(m), l1 = Eigen::VectorXd::Zero(m), l2 = Eigen::VectorXd::Zero(m);
+    const double coeff[3] = {1.0, -2.0, 1.0};
+    for (int i = std::max(1, first - 1); i <= std::min(n - 2, last + 1); ++i)
+      for (int a = 0; a < 3; ++a)
+        for (int b = 0; b <= a; ++b) {
+          const int ia = i - 1 + a - first, ib = i - 1 + b - first;
+          if (ia < 0 || ia >= m || ib < 0 || ib >= m) continue;
+          const double h = 2.0 * l2s * coeff[a] * coeff[b];
+          (ia == ib ? l0 : ia - ib == 1 ? l1 : l2)(ia) += h;
+        }
+    for (int i = 0; i < m; ++i) {  // banded Cholesky, in place
+      if (i >= 2) l2(i) /= l0(i - 2);
+      if (i >= 1) l1(i) = (l1(i) - (i >= 2 ? l2(i) * l1(i - 1) : 0.0)) / l0(i - 1);
+      const double d = l0(i) - (i >= 1 ? l1(i) * l1(i) : 0.0) - (i >= 2 ? l2(i) * l2(i) : 0.0);
+      if (!(d > 0.0) || !std::isfinite(d)) return false;
+      l0(i) = std::sqrt(d);
+    }
+    return true;
+  }
+  // x from y: solve L^T x = y (backward).
+  void unpack(const double* y) {
+    const int m = last - first + 1;
+    for (int c = 0; c < 3; ++c)
+      for (int i = m - 1; i >= 0; --i) {
+        double v = y[3 * i + c];
+        if (preconditioned) {
+          if (i + 1 < m) v -= l1(i + 1) * q(first + i + 1, c);
+          if (i + 2 < m) v -= l2(i + 2) * q(first + i + 2, c);
+          v /= l0(i);
+        }
+        q(first + i, c) = v;
+      }
+  }
+  // y from the current q: y = L^T x.
+  void pack(double* y) const {
+    const int m = last - first + 1;
+    for (int c = 0; c < 3; ++c)
+      for (int i = 0; i < m; ++i) {
+        double v = q(first + i, c);
+        if (preconditioned) {
+          v *= l0(i);
+          if (i + 1 < m) v += l1(i + 1) * q(first + i + 1, c);
+          if (i + 2 < m) v += l2(i + 2) * q(first + i + 2, c);
+        }
+        y[3 * i + c] = v;
+      }
+  }
+  // The gradient in y from grad (in x): solve L gy = gx (forward).
+  void packGradient(double* g) {
+    const int m = last - first + 1;
+    for (int c = 0; c < 3; ++c)
+      for (int i = 0; i < m; ++i) {
+        double v = grad(first + i, c);
+        if (preconditioned) {
+          if (i >= 1) v -= l1(i) * g[3 * (i - 1) + c];
+          if (i >= 2) v -= l2(i) * g[3 * (i - 2) + c];
+          v /= l0(i);
+        }
+        g[3 * i + c] = v;
+      }
   }
   // f_p2 and its gradient; also the unweighted terms when asked.
   double cost(Eigen::MatrixX3d* g, double* fs = nullptr, double* fc = nullptr, double* fd = nullptr) {
@@ -130,9 +198,7 @@ struct RefineProblem {
       non_finite = true;
       throw nlopt::forced_stop();  // caught by NLopt's C++ wrapper, re-thrown by optimize()
     }
-    if (g)
-      for (int i = first; i <= last; ++i)
-        for (int c = 0; c < 3; ++c) g[3 * (i - first) + c] = grad(i, c);
+    if (g) packGradient(g);
     if (f < best_cost) {
       best_cost = f;
       best_x.assign(x, x + n);
@@ -298,9 +364,9 @@ OptimizationResult PathGuidedOptimizer::refinePhase(const UniformBspline& spline
   problem.first = spline.degree();
   problem.last = spline.numControlPoints() - 1 - spline.degree();
   const int m = problem.last - problem.first + 1;
+  problem.preconditioned = config_.precondition && problem.factorSmoothness(int(problem.q.rows()), config_.l2s);
   std::vector<double> x(size_t(3 * m));
-  for (int i = 0; i < m; ++i)
-    for (int c = 0; c < 3; ++c) x[size_t(3 * i + c)] = problem.q(problem.first + i, c);
+  problem.pack(x.data());
 
   std::string error;
   try {

@@ -90,6 +90,11 @@ TopoReplanner::TopoReplanner(const Config& config)
                     c.guide_follows_initial = c.guide_follows_initial || config.profile_timing;
                     return c;
                   }())),
+      raw_optimizers_(size_t(config.num_threads), PathGuidedOptimizer([&] {
+                        PathGuidedOptimizer::Config c = optimizers_.front().config();
+                        c.precondition = false;
+                        return c;
+                      }())),
       checker_([&] {
         PathGuidedOptimizer::Config c = config.optimizer;
         c.reallocate_time = false;
@@ -476,14 +481,15 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
   result.stats.search_ms = msSince(t_search);
 
   // One path-guided optimisation per guide, in parallel; each worker has its own optimiser.
-  auto optimizeAll = [&](const std::vector<Path>& guides) {
+  auto optimizeAll = [&](const std::vector<Path>& guides, bool raw) {
+    std::vector<PathGuidedOptimizer>& optimizers = raw ? raw_optimizers_ : optimizers_;
     auto t_opt = std::chrono::steady_clock::now();
     const size_t first = result.candidates.size();
     result.candidates.resize(first + guides.size());
     pool_.parallelFor(int(guides.size()), [&](int i, int worker) {
       ReplanCandidate& c = result.candidates[first + size_t(i)];
       c.guide = guides[size_t(i)];
-      c.result = optimizers_[size_t(worker)].optimize(lp.initial, c.guide, map);
+      c.result = optimizers[size_t(worker)].optimize(lp.initial, c.guide, map);
       // A guide much longer than the segment that failed from the segment's timing: once more from
       // an initial spline along the guide, timed for its length (the fast path is unchanged).
       if (c.result.status != OptimizationStatus::kSuccess)
@@ -491,7 +497,7 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
           c.retried_along = true;
           c.first_status = c.result.status;
           c.first_min_clearance_m = c.result.stats.min_clearance_m;
-          OptimizationResult second = optimizers_[size_t(worker)].optimize(*along, c.guide, map);
+          OptimizationResult second = optimizers[size_t(worker)].optimize(*along, c.guide, map);
           // The better attempt is kept (and reported): the one that passed, else the clearer one.
           if (second.status == OptimizationStatus::kSuccess ||
               (second.status == c.result.status && second.stats.min_clearance_m > c.result.stats.min_clearance_m))
@@ -513,7 +519,7 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
     result.chosen = selectCandidate(result.candidates, config_.max_start_velocity_step_mps,
                                     config_.max_selection_delay_ratio);
   };
-  if (search.status == SearchStatus::kSuccess) optimizeAll(fromStart(search.paths));
+  if (search.status == SearchStatus::kSuccess) optimizeAll(fromStart(search.paths), false);
 
   // Last resort, when the search found nothing or no candidate passed: one A* guide.
   if (result.chosen < 0) {
@@ -523,11 +529,19 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
     if (astar.status == SearchStatus::kSuccess) {
       const VisibilityChecker checker(map, config_.astar.clearance_m, config_.astar.unknown_is_free);
       result.stats.used_astar = true;
-      optimizeAll(fromStart({PathShortener(checker).shorten(astar.path)}));
+      optimizeAll(fromStart({PathShortener(checker).shorten(astar.path)}), false);
     } else if (result.candidates.empty()) {
       return fail(ReplanStatus::kNoPath, std::string("no guide path: ") + toString(search.status) + ", A*: " +
                                              toString(astar.status));
     }
+  }
+  // Then every guide once more, refined in the control points' own coordinates.
+  if (result.chosen < 0 && config_.raw_refine_fallback && config_.optimizer.precondition &&
+      !result.candidates.empty()) {
+    std::vector<Path> guides;
+    for (const ReplanCandidate& c : result.candidates) guides.push_back(c.guide);
+    result.stats.used_raw_refine = true;
+    optimizeAll(guides, true);
   }
   if (result.chosen < 0) {
     // Why each candidate failed, for the logs: "2 x in collision (min clearance 0.21 m), 1 x infeasible".
@@ -567,6 +581,7 @@ ReplanResult TopoReplanner::replan(const EsdfMap& map, const ReplanRequest& requ
     std::snprintf(ends, sizeof(ends), "; from (%.2f, %.2f, %.2f) to the local goal (%.2f, %.2f, %.2f)%s", lp.start.x(),
                   lp.start.y(), lp.start.z(), lp.goal.x(), lp.goal.y(), lp.goal.z(),
                   result.stats.used_astar ? ", A* guide tried" : "");
+    if (result.stats.used_raw_refine) message += ", refined again in raw coordinates";
     message += ends;
     return fail(ReplanStatus::kOptimizationFailed, message);
   }

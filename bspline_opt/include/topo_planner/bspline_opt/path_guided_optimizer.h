@@ -116,6 +116,13 @@ class PathGuidedOptimizer {
     /// Past steps kept by the quasi-Newton algorithms (LBFGS, TNEWTON, VAR). 0 lets NLopt choose,
     /// which is "10 MiB worth of vectors": thousands here, and most of the run time goes to them.
     int vector_storage = 10;
+    /// Refine in preconditioned coordinates y = L^T x, where L L^T is the Hessian of the smoothness
+    /// term over the free control points (a banded Cholesky factor, computed once per run). The
+    /// second differences make that Hessian ill-conditioned (its condition number grows as the
+    /// fourth power of the number of points), and L-BFGS on the raw control points used every
+    /// evaluation of its budget; in y the smoothness term is the identity's and the collision and
+    /// feasibility terms are what is left to learn. Same minimum, fewer evaluations to reach it.
+    bool precondition = true;
     // Feasibility and final check.
     bool reallocate_time = true;  ///< lengthen the knot span when the limits are exceeded (else kInfeasible)
     double max_time_ratio = 3.0;  ///< a longer stretch is kInfeasible (the stretched spline is returned)

@@ -123,6 +123,7 @@ struct ReplanCandidate {
 struct ReplanStats {
   bool searched = false;         ///< false when the reference was free within the horizon
   bool used_astar = false;       ///< an A* guide was tried (the search found nothing or no candidate passed)
+  bool used_raw_refine = false;  ///< the guides were optimised again without preconditioning (raw_refine_fallback)
   double check_ms = 0.0;         ///< reference check and local problem
   double search_ms = 0.0;        ///< topological search (+ A* fallback)
   double optimize_ms = 0.0;      ///< the parallel optimisation, wall time
@@ -206,6 +207,12 @@ class TopoReplanner {
     /// grew beside the trajectory being flown) is planned from, and the plan must move out of the
     /// clearance (PathGuidedOptimizer's check) [m].
     double min_start_clearance_m = 1e9;
+    /// When no candidate passed (the A* guide's included) and the optimiser refines in preconditioned
+    /// coordinates (PathGuidedOptimizer::Config::precondition), every guide is optimised once more
+    /// in the control points' own coordinates. The two descents can end in different local minima
+    /// beside a narrow opening; this keeps every plan the raw refine found (a window in a corner at
+    /// the band's floor, test_plan_problem) at no cost to the calls that pass.
+    bool raw_refine_fallback = true;
     int num_threads = 2;                  ///< optimisation workers, the caller included
     double duration_weight = 0.0;         ///< selection cost weight of the duration [m^2/s^6]
     /// Only candidates that reach the local goal within this factor of the fastest one's time are
@@ -256,6 +263,7 @@ class TopoReplanner {
   std::optional<UniformBspline> initialAlong(const LocalProblem& lp, const Path& guide) const;
 
   std::vector<PathGuidedOptimizer> optimizers_;  // one per worker
+  std::vector<PathGuidedOptimizer> raw_optimizers_;  // the same without preconditioning (raw_refine_fallback)
   PathGuidedOptimizer checker_;                  // final check without time reallocation
   TopoPathSearch search_;
   GridAStar astar_;
