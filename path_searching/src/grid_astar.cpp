@@ -76,7 +76,8 @@ GridAStar::Result GridAStar::searchBox(const EsdfMap& map, const Eigen::Vector3d
     const int x = int(k % size_t(n.x())), y = int((k / size_t(n.x())) % size_t(n.y())), z = int(k / (size_t(n.x()) * n.y()));
     return Eigen::Vector3i(box.min + Eigen::Vector3i(x, y, z));
   };
-  auto heuristic = [&](const Eigen::Vector3i& i) { return float((i - e).cast<double>().norm()); };
+  const double weight = std::isfinite(config_.heuristic_weight) ? std::max(1.0, config_.heuristic_weight) : 1.0;
+  auto heuristic = [&](const Eigen::Vector3i& i) { return float(weight * (i - e).cast<double>().norm()); };
 
   struct Item {
     float f;

@@ -320,6 +320,39 @@ TEST(GridAStar, FindsACollisionFreeNearShortestPath) {
   EXPECT_EQ(astar.search(map, {1, 4, 1.5}, {9, 4, 1.5}).path, r.path);
 }
 
+// The weighted heuristic (Config::heuristic_weight): in a forest the path is at most that factor
+// longer than plain A*'s shortest grid path, found with a fraction of its expansions.
+TEST(GridAStar, TheWeightedHeuristicExpandsLessForANearShortestPath) {
+  SyntheticScene scene({20.0, 20.0, 3.0});
+  scene.forest(ObstacleDensity::kHigh, 31);
+  const EsdfMap& map = scene.finish();
+  GridAStar::Config c;
+  c.clearance_m = 0.3;
+  c.heuristic_weight = 1.0;
+  GridAStar plain(c);
+  c.heuristic_weight = 1.5;
+  GridAStar weighted(c);
+  const VisibilityChecker roomy(map, 0.6, true), free(map, 0.3, true);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> uxy(1.5, 18.5), uz(1.0, 2.0);
+  long plain_expansions = 0, weighted_expansions = 0;
+  int searches = 0;
+  while (searches < 10) {
+    const Eigen::Vector3d start(uxy(rng), uxy(rng), uz(rng)), goal(uxy(rng), uxy(rng), uz(rng));
+    if ((goal - start).norm() < 8.0 || !roomy.isFree(start) || !roomy.isFree(goal)) continue;
+    const GridAStar::Result a = plain.search(map, start, goal), b = weighted.search(map, start, goal);
+    ASSERT_EQ(a.status, b.status);
+    if (a.status != SearchStatus::kSuccess) continue;
+    ++searches;
+    for (const Eigen::Vector3d& p : b.path) EXPECT_TRUE(free.isFree(p) || p == start || p == goal);
+    EXPECT_LE(pathLength(b.path), 1.5 * pathLength(a.path) + 1e-9);
+    plain_expansions += a.expansions;
+    weighted_expansions += b.expansions;
+  }
+  EXPECT_LT(weighted_expansions, plain_expansions / 3);
+  std::printf("10 forest searches: %ld expansions plain, %ld weighted\n", plain_expansions, weighted_expansions);
+}
+
 TEST(GridAStar, ReportsNoPathBudgetAndObstacles) {
   SyntheticScene scene({10.0, 8.0, 3.0});
   scene.box({4.8, -1.0, -1.0}, {5.2, 9.0, 4.0});  // a wall with no opening

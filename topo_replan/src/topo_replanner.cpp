@@ -62,6 +62,7 @@ bool TopoReplanner::Config::validate(std::string* why) const {
   if (!(max_search_start_offset_m >= 0.0 && max_search_start_offset_m <= 5.0))
     err << "max_search_start_offset_m must be in [0, 5]; ";
   if (!(std::isfinite(astar.search_margin_m) && astar.search_margin_m >= 0.0)) err << "astar: search_margin_m must be >= 0; ";
+  if (!(std::isfinite(astar.heuristic_weight) && astar.heuristic_weight >= 1.0)) err << "astar: heuristic_weight must be >= 1; ";
   if (astar.margin_doublings < 0 || astar.margin_doublings > 6) err << "astar: margin_doublings must be in [0, 6]; ";
   if (num_threads < 1 || num_threads > 64) err << "num_threads must be in [1, 64]; ";
   if (!(std::isfinite(duration_weight) && duration_weight >= 0.0)) err << "duration_weight must be >= 0; ";

@@ -219,7 +219,9 @@ TEST(PlanProblem, AFlightsWallFailureIsFixedByTheStretchedRetry) {
 // floor (a mixed world, realistic sensing) and a window in the map's corner, at its edge and the
 // band's floor (a windows world). At their distance the faces pushed every candidate into the
 // obstacle across the way (0 of 60 and 13 of 33 saved failures planned); counted
-// optimizer.face_offset_m farther (needing no clearance) they do not.
+// optimizer.face_offset_m farther (needing no clearance) they do not. The failures are those of
+// the plain A* guide (heuristic_weight 1) the flights had; the weighted A*'s guide passes the
+// first problem even at the faces' distance.
 TEST(PlanProblem, AFaceBesideANarrowWayNeedsNoClearance) {
   for (const char* name : {"way_above_the_band_floor", "window_in_the_maps_corner"}) {
     SCOPED_TRACE(name);
@@ -228,6 +230,7 @@ TEST(PlanProblem, AFaceBesideANarrowWayNeedsNoClearance) {
     ASSERT_TRUE(loadPlanProblem(kPlans + name, &problem, &why)) << why;
     TopoReplanner::Config at_distance = plannerYaml();
     at_distance.optimizer.face_offset_m = 0.0;
+    at_distance.astar.heuristic_weight = 1.0;
     const ReplanResult before = TopoReplanner::create(at_distance, &why)->replan(*problem.esdf, problem.request);
     EXPECT_EQ(before.status, ReplanStatus::kOptimizationFailed) << before.message;
 
@@ -340,12 +343,15 @@ TEST(PlanProblem, NoLocalGoalOnAReferenceAboveTheBand) {
 // band's floor: the guide keeps the search's clearance, and the guide phase's spline, stretched to
 // the limits, passes the check (clearance 0.26 m); but every refine (the stretched retry and the
 // collision retries too) pushed the curve to 0.23 m or less of the window's edge, and the call failed
-// (four in a row in the flight). The guide phase's spline is kept as the plan.
+// (four in a row in the flight). The guide phase's spline is kept as the plan. With the flight's
+// plain A* guide (heuristic_weight 1): the weighted A*'s guide leads to a refine that passes.
 TEST(PlanProblem, TheGuidePhaseIsKeptWhenEveryRefineCollides) {
   PlanProblem problem;
   std::string why;
   ASSERT_TRUE(loadPlanProblem(kPlans + "low_window_refined_into_its_edge", &problem, &why)) << why;
+  expectCheckedPlan(problem, plannerYaml());
   TopoReplanner::Config config = plannerYaml();
+  config.astar.heuristic_weight = 1.0;
   config.optimizer.guide_phase_fallback = false;
   EXPECT_NE(TopoReplanner::create(config, &why)->replan(*problem.esdf, problem.request).status,
             ReplanStatus::kSuccess);

@@ -1,5 +1,5 @@
 #pragma once
-// Grid A* (26-connected, Euclidean step costs and heuristic) on the map's voxels, free meaning
+// Grid A* (26-connected, Euclidean step costs, weighted Euclidean heuristic) on the map's voxels, free meaning
 // at least clearance_m from obstacles: the single guide path of the baselines and the fallback of
 // the replanner. Searches a box around start and goal; its buffers are kept between calls and
 // reset by a generation stamp, not reallocated.
@@ -23,6 +23,10 @@ class GridAStar {
     /// with the margin doubled, up to this many times (each with the full expansion budget).
     int margin_doublings = 0;
     int max_expansions = 400000;     ///< budget
+    /// The heuristic is this times the Euclidean distance to the goal (weighted A*: a path at most
+    /// this factor longer than the shortest, found with far fewer expansions; the replanner shortens
+    /// it anyway). 1: plain A*, the shortest grid path. >= 1.
+    double heuristic_weight = 1.5;
     double min_z_m = -1e9;           ///< height band (a geofence): the box keeps to it, and to start and goal [m]
     double max_z_m = 1e9;
   };
