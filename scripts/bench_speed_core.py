@@ -5,8 +5,11 @@ back) at several max_vel, in simulated time, a few flights at once. Seconds per 
 ROS simulation's minutes: the development loop of the speed work; make bench-speed is the referee.
 
 Per flight and per style: goals, collisions, min clearance, mean speed, share of time above 0.8 max_vel,
-mission time / oracle time, emergency stops, failed plans, the speed account. Ends with
+mission time / oracle time, emergency stops, failed plans, the planning time (the wall time of each
+FSM tick that planned, and the replanner's part of it: the ticks' surplus is the route search and
+the commit), the speed account. Ends with
   RESULT flights=... goals_reached_rate=... collisions=... time_ratio_median=... mean_speed_3=... ...
+  tick_ms_median=... tick_ms_p95=... replanner_ms_median=... replanner_ms_p95=...
 """
 import argparse
 import concurrent.futures
@@ -70,14 +73,22 @@ def summary(flights):
         'stops': sum(r['emergency_stops'] for r in ok), 'failed': sum(r['replan_failures'] for r in ok),
         'calls': sum(r['replans'] + r['replan_failures'] for r in ok),
         'account': {c: (acc[c] / slow if slow > 0 else 0.0) for c in CAUSES},
+        'tick_ms': [m for r in ok for m in r.get('replan_ms', [])],
+        'planner_ms': [m for r in ok for m in r.get('planner_ms', [])],
     }
+
+
+def pct(v, q):
+    v = sorted(v)
+    return v[min(len(v) - 1, int(q * (len(v) - 1) + 0.5))] if v else None
 
 
 def row(label, s):
     account = ' '.join(f"{c[:4]} {100 * s['account'][c]:.0f}" for c in CAUSES if s['account'][c] >= 0.005)
     return (f"| {label} | {s['goals']}/{s['goals_total']} | {s['collisions']} | {fmt(s['min_clearance'])} | "
             f"{fmt(s['mean_speed'])} | {100 * (s['fast'] or 0):.0f}% | {fmt(s['ratio_median'])} / {fmt(s['ratio_max'])} | "
-            f"{s['stops']} | {s['failed']}/{s['calls']} | {account} |")
+            f"{s['stops']} | {s['failed']}/{s['calls']} | {fmt(pct(s['tick_ms'], 0.5))} / {fmt(pct(s['tick_ms'], 0.95))} | "
+            f"{fmt(pct(s['planner_ms'], 0.5))} / {fmt(pct(s['planner_ms'], 0.95))} | {account} |")
 
 
 def main(argv):
@@ -117,7 +128,8 @@ def main(argv):
             else:
                 print(f"  {f['name']:34s} NO RESULT", flush=True)
     header = ['| group | goals | collisions | min clearance [m] | mean speed [m/s] | fast | time / oracle median / max | '
-              'stops | failed plans | slow time by cause [%] |', '|---|---|---|---|---|---|---|---|---|---|']
+              'stops | failed plans | planning tick ms median / p95 | replanner ms median / p95 | slow time by cause [%] |',
+              '|---|---|---|---|---|---|---|---|---|---|---|---|']
     lines = header[:]
     for v in vels:
         for st in styles:
@@ -128,7 +140,9 @@ def main(argv):
     speeds = ' '.join(f"mean_speed_{v:g}={fmt(summary([f for f in flights if f['vel'] == v])['mean_speed'])}" for v in vels)
     print(f"RESULT flights={len(flights)} goals_reached_rate={all_s['goals'] / max(1, all_s['goals_total']):.3f} "
           f"collisions={all_s['collisions']} min_clearance_m={fmt(all_s['min_clearance'], 3)} "
-          f"time_ratio_median={fmt(all_s['ratio_median'])} stops={all_s['stops']} {speeds}")
+          f"time_ratio_median={fmt(all_s['ratio_median'])} stops={all_s['stops']} {speeds} "
+          f"tick_ms_median={fmt(pct(all_s['tick_ms'], 0.5))} tick_ms_p95={fmt(pct(all_s['tick_ms'], 0.95))} "
+          f"replanner_ms_median={fmt(pct(all_s['planner_ms'], 0.5))} replanner_ms_p95={fmt(pct(all_s['planner_ms'], 0.95))}")
     with open(os.path.join(args.out, 'bench_speed_core.md'), 'w') as f:
         f.write('\n'.join(lines) + '\n')
     return 0

@@ -79,6 +79,36 @@ bool worldPoints(const std::string& map_file, const std::vector<std::string>& fo
 
 }  // namespace
 
+// Times as a JSON list, 3 decimals.
+std::string msList(const std::vector<double>& ms) {
+  std::ostringstream o;
+  o << "[";
+  char buf[32];
+  for (size_t i = 0; i < ms.size(); ++i) {
+    std::snprintf(buf, sizeof(buf), "%.3f", ms[i]);
+    o << (i ? ", " : "") << buf;
+  }
+  o << "]";
+  return o.str();
+}
+
+// The tail's planning calls: tick ms, published, searched, A*, raw refine, guides, search / optimise ms.
+std::string slowCalls(const std::vector<FsmEvent>& events) {
+  std::ostringstream o;
+  o << "[";
+  char buf[256];
+  for (size_t i = 0; i < events.size(); ++i) {
+    const ReplanStats& s = events[i].stats;
+    std::snprintf(buf, sizeof(buf), "%s{\"tick_ms\": %.2f, \"published\": %d, \"searched\": %d, \"astar\": %d, "
+                  "\"raw\": %d, \"paths\": %d, \"search_ms\": %.2f, \"topo_ms\": %.2f, \"samples\": %d, \"optimize_ms\": %.2f}",
+                  i ? ", " : "", s.total_ms, int(events[i].published), int(s.searched), int(s.used_astar),
+                  int(s.used_raw_refine), s.paths, s.search_ms, s.search.total_ms, s.search.roadmap.samples, s.optimize_ms);
+    o << buf;
+  }
+  o << "]";
+  return o.str();
+}
+
 int main(int argc, char** argv) {
   std::string map_file, config_dir = TOPO_PLANNER_CONFIG_DIR, sensing = "ideal", json, trace;
   std::vector<std::string> forest;
@@ -226,6 +256,8 @@ int main(int argc, char** argv) {
         << ", \"reached_time_s\": " << (std::isfinite(r.reached_time_s) ? std::to_string(r.reached_time_s) : "null")
         << ", \"time_ratio\": " << (std::isfinite(r.time_ratio) ? std::to_string(r.time_ratio) : "null")
         << ", \"replans\": " << r.replans << ", \"replan_failures\": " << r.replan_failures
+        << ", \"replan_ms\": " << msList(r.replan_ms) << ", \"planner_ms\": " << msList(r.planner_ms)
+        << ", \"slow_calls\": " << slowCalls(r.slow_calls)
         << ", \"emergency_stops\": " << r.emergency_stops << ", \"speed_account_s\": {\"total\": " << r.speed.total_s
         << ", \"fast\": " << r.speed.fast_s;
     for (int k = 0; k < kNumSlowCauses; ++k) out << ", \"" << toString(SlowCause(k)) << "\": " << r.speed.slow_s[size_t(k)];

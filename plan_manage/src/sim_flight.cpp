@@ -185,6 +185,11 @@ SimFlight::Result SimFlight::fly(const TruthMap& truth, const Eigen::Vector3d& s
         if (out.event) {
           (out.event->published ? r.replans : r.replan_failures) += 1;
           r.replan_ms.push_back(&out == &outputs[1] ? ms : 0.0);
+          r.planner_ms.push_back(out.event->stats.total_ms);
+          if (&out == &outputs[1] && ms >= 5.0) {
+            r.slow_calls.push_back(*out.event);
+            r.slow_calls.back().stats.total_ms = ms;  // the tick's
+          }
         }
         if (out.trajectory) {
           const ExecTrajectory& traj = *out.trajectory;

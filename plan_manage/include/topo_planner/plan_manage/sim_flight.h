@@ -84,7 +84,9 @@ class SimFlight {
     double time_ratio = NAN;      ///< reached_time_s / oracle_time_s
     int replans = 0;              ///< planning calls that published
     int replan_failures = 0;      ///< and that did not
-    std::vector<double> replan_ms;  ///< wall time of every planning call [ms]
+    std::vector<double> replan_ms;  ///< wall time of every planning call [ms]: the FSM's tick that made it
+    std::vector<double> planner_ms;  ///< the replanner's part of it (ReplanStats::total_ms) [ms]
+    std::vector<FsmEvent> slow_calls;  ///< the planning calls whose tick took 5 ms or more (the tail)
     int emergency_stops = 0;      ///< braking trajectories published
     int max_decel_events = 0;     ///< setpoints decelerating harder than the planning limit + 0.5 m/s^2
     double max_setpoint_step_m = 0.0;  ///< largest position step between setpoints beyond |v| dt [m]
