@@ -127,27 +127,36 @@ TEST(PathGuidedOptimizer, NarrowGapBetweenPillarsDefeatsGtoButNotPgo) {
 
 // Seeded forest tasks: every result reported successful passes the independent dense oracle, and
 // PGO (guide from grid A* + shortening) succeeds at least as often as GTO, and on nearly all tasks.
-TEST(PathGuidedOptimizer, ForestTasksSuccessMeansSafeAndFeasible) {
-  SyntheticScene scene({20.0, 20.0, 3.0});
-  scene.forest(ObstacleDensity::kMedium, 1001);
-  const EsdfMap& map = scene.finish();
+// Seeded tasks in a medium forest of 20 x 20 x 3 m: start and goal 5-9 m apart and 0.6 m clear,
+// the straight line between them blocked; fn(task, start, goal, guide) with the guide from grid A*
+// at 0.4 m, shortened, for `count` of them.
+template <typename Fn>
+void forEachForestTask(const EsdfMap& map, uint32_t seed, int count, Fn&& fn) {
   GridAStar::Config ac;
   ac.clearance_m = 0.4;
   GridAStar astar(ac);
   const VisibilityChecker checker(map, 0.4, true), roomy(map, 0.6, true), blocked(map, kClearance, true);
   const PathShortener shortener(checker);
-  const PathGuidedOptimizer optimizer(testConfig());
-  std::mt19937 rng(17);
+  std::mt19937 rng(seed);
   std::uniform_real_distribution<double> uxy(1.5, 18.5), uz(1.0, 2.0);
-  int tasks = 0, pgo_ok = 0, gto_ok = 0;
-  while (tasks < 12) {
+  for (int tasks = 0; tasks < count;) {
     const Eigen::Vector3d start(uxy(rng), uxy(rng), uz(rng)), goal(uxy(rng), uxy(rng), uz(rng));
     const double d = (goal - start).norm();
     if (d < 5.0 || d > 9.0 || !roomy.isFree(start) || !roomy.isFree(goal) || blocked.lineVisible(start, goal)) continue;
     const GridAStar::Result a = astar.search(map, start, goal);
     if (a.status != SearchStatus::kSuccess) continue;
-    ++tasks;
-    const Path guide = shortener.shorten(a.path);
+    fn(++tasks, start, goal, shortener.shorten(a.path));
+  }
+}
+
+TEST(PathGuidedOptimizer, ForestTasksSuccessMeansSafeAndFeasible) {
+  SyntheticScene scene({20.0, 20.0, 3.0});
+  scene.forest(ObstacleDensity::kMedium, 1001);
+  const EsdfMap& map = scene.finish();
+  const PathGuidedOptimizer optimizer(testConfig());
+  int pgo_ok = 0, gto_ok = 0;
+  forEachForestTask(map, 17, 12, [&](int tasks, const Eigen::Vector3d& start, const Eigen::Vector3d& goal,
+                                     const Path& guide) {
     const UniformBspline initial = reference(start, goal);
     const OptimizationResult pgo = optimizer.optimize(initial, guide, map);
     const OptimizationResult gto = optimizer.gto(initial, map);
@@ -158,7 +167,7 @@ TEST(PathGuidedOptimizer, ForestTasksSuccessMeansSafeAndFeasible) {
     }
     pgo_ok += pgo.status == OptimizationStatus::kSuccess;
     gto_ok += gto.status == OptimizationStatus::kSuccess;
-  }
+  });
   EXPECT_GE(pgo_ok, 11);
   EXPECT_GE(pgo_ok, gto_ok);
 }
@@ -199,29 +208,16 @@ TEST(PathGuidedOptimizer, PreconditionedRefineNeedsFewerEvaluationsOnForestTasks
   SyntheticScene scene({20.0, 20.0, 3.0});
   scene.forest(ObstacleDensity::kMedium, 1002);
   const EsdfMap& map = scene.finish();
-  GridAStar::Config ac;
-  ac.clearance_m = 0.4;
-  GridAStar astar(ac);
-  const VisibilityChecker checker(map, 0.4, true), roomy(map, 0.6, true), blocked(map, kClearance, true);
-  const PathShortener shortener(checker);
   PathGuidedOptimizer::Config c = testConfig();
   c.max_iterations = 200;
   c.precondition = false;
   const PathGuidedOptimizer raw(c);
   c.precondition = true;
   const PathGuidedOptimizer pre(c);
-  std::mt19937 rng(23);
-  std::uniform_real_distribution<double> uxy(1.5, 18.5), uz(1.0, 2.0);
-  int tasks = 0, raw_ok = 0, pre_ok = 0, raw_evals = 0, pre_evals = 0;
+  int raw_ok = 0, pre_ok = 0, raw_evals = 0, pre_evals = 0;
   double raw_cost = 0.0, pre_cost = 0.0;
-  while (tasks < 10) {
-    const Eigen::Vector3d start(uxy(rng), uxy(rng), uz(rng)), goal(uxy(rng), uxy(rng), uz(rng));
-    const double d = (goal - start).norm();
-    if (d < 5.0 || d > 9.0 || !roomy.isFree(start) || !roomy.isFree(goal) || blocked.lineVisible(start, goal)) continue;
-    const GridAStar::Result a = astar.search(map, start, goal);
-    if (a.status != SearchStatus::kSuccess) continue;
-    ++tasks;
-    const UniformBspline warm = raw.guidePhase(reference(start, goal), shortener.shorten(a.path)).spline;
+  forEachForestTask(map, 23, 10, [&](int, const Eigen::Vector3d& start, const Eigen::Vector3d& goal, const Path& guide) {
+    const UniformBspline warm = raw.guidePhase(reference(start, goal), guide).spline;
     const OptimizationResult r = raw.refinePhase(warm, map), p = pre.refinePhase(warm, map);
     ASSERT_EQ(r.status, OptimizationStatus::kSuccess);
     ASSERT_EQ(p.status, OptimizationStatus::kSuccess);
@@ -229,7 +225,7 @@ TEST(PathGuidedOptimizer, PreconditionedRefineNeedsFewerEvaluationsOnForestTasks
     raw_cost += r.cost.phase2, pre_cost += p.cost.phase2;
     raw_ok += raw.check(r.spline, map).status == OptimizationStatus::kSuccess;
     pre_ok += pre.check(p.spline, map).status == OptimizationStatus::kSuccess;
-  }
+  });
   EXPECT_GE(pre_ok, raw_ok);
   EXPECT_LT(pre_cost, raw_cost);
   EXPECT_LT(pre_evals, raw_evals * 7 / 10);
